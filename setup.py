@@ -1,0 +1,27 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "neforward_ros"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*", "bench"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", glob("config/*")),
+    ],
+    python_requires=">=3.11",
+    install_requires=["setuptools", "numpy>=1.26", "yourdfpy>=0.0.56"],
+    extras_require={"test": ["pytest>=7", "pin>=3.4", "hypothesis>=6", "ruff>=0.6"]},
+    zip_safe=True,
+    maintainer="neforward_ros developers",
+    maintainer_email="neforward-ros@example.com",
+    description="Link angular velocities and linear/angular accelerations from joint states and a URDF "
+    "(Newton-Euler forward recursion) for ROS 2.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={"console_scripts": ["neforward = neforward_ros.cli:main"]},
+)

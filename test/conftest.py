@@ -1,0 +1,36 @@
+"""Shared test helpers: the test robots and an accuracy assertion."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+TEST_DIR = Path(__file__).resolve().parent
+URDF_DIR = TEST_DIR / "urdf"
+CONFIG_DIR = TEST_DIR.parent / "config"
+
+TEST_ROBOTS = {
+    "planar_2r": URDF_DIR / "planar_2r.urdf",
+    "arm_6r": URDF_DIR / "arm_6r.urdf",
+    "tree": URDF_DIR / "tree.urdf",
+    "prismatic": URDF_DIR / "prismatic.urdf",
+    "mimic": URDF_DIR / "mimic.urdf",
+    "fixed_between": URDF_DIR / "fixed_between.urdf",
+    "panda": CONFIG_DIR / "panda.urdf",
+}
+
+
+def assert_close(actual: np.ndarray, expected: np.ndarray, rel: float, what: str = "") -> None:
+    """|actual - expected| <= rel * max(1, max |expected|), elementwise: relative to the field's scale."""
+    actual, expected = np.asarray(actual), np.asarray(expected)
+    assert actual.shape == expected.shape, f"{what}: shape {actual.shape} != {expected.shape}"
+    scale = max(1.0, float(np.max(np.abs(expected), initial=0.0)))
+    error = float(np.max(np.abs(actual - expected), initial=0.0))
+    assert error <= rel * scale, f"{what}: max error {error:.3e} exceeds {rel:.1e} x scale {scale:.3e}"
+
+
+@pytest.fixture(params=sorted(TEST_ROBOTS))
+def robot_path(request) -> Path:
+    return TEST_ROBOTS[request.param]
