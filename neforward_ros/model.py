@@ -44,7 +44,7 @@ class JointKind(enum.Enum):
         return self in (JointKind.REVOLUTE, JointKind.CONTINUOUS)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class ParentJoint:
     """The joint that attaches a link to its parent link.
 
@@ -63,10 +63,10 @@ class ParentJoint:
             -1 for a fixed joint.
         multiplier, offset: ``qj = multiplier * q[q_index] + offset``; (1, 0) unless mimic.
         mimic_of: name of the independent joint this one follows, or None.
-        rotation_sin, rotation_versine: ``origin_rotation @ K`` and ``origin_rotation @ K @ K``
-            with K the cross-product matrix of ``axis``, so that for a rotating joint
-            ``origin_rotation @ Rot(axis, qj) = origin_rotation + sin(qj) rotation_sin
-            + (1 - cos(qj)) rotation_versine`` (Rodrigues' formula).
+        rotation_terms: ``origin_rotation``, ``origin_rotation @ K`` and ``origin_rotation @ K @ K``
+            (27 numbers, each matrix row-major) with K the cross-product matrix of ``axis``, so that
+            for a rotating joint ``origin_rotation @ Rot(axis, qj) = origin_rotation
+            + sin(qj) origin_rotation @ K + (1 - cos(qj)) origin_rotation @ K @ K`` (Rodrigues).
         axis_in_parent: ``origin_rotation @ axis``, the prismatic direction in the parent frame.
     """
 
@@ -80,8 +80,7 @@ class ParentJoint:
     multiplier: float
     offset: float
     mimic_of: str | None
-    rotation_sin: Mat3
-    rotation_versine: Mat3
+    rotation_terms: tuple[float, ...]
     axis_in_parent: Vec3
 
 
@@ -322,8 +321,7 @@ def _parent_joint(joint, parent_index: int, joint_by_name, joint_index, in_tree)
         multiplier=multiplier,
         offset=offset,
         mimic_of=leader,
-        rotation_sin=_mat3(rotation @ k),
-        rotation_versine=_mat3(rotation @ k @ k),
+        rotation_terms=_mat3(rotation) + _mat3(rotation @ k) + _mat3(rotation @ k @ k),
         axis_in_parent=_vec3(rotation @ axis),
     )
 

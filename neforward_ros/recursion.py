@@ -24,7 +24,9 @@ of shape (T,) it computes T samples at once, vectorised over the samples.
 
 from __future__ import annotations
 
+import functools
 import math
+import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Literal
@@ -37,9 +39,9 @@ from neforward_ros.model import JointKind, RobotModel
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
 """Gravity in the root frame for a z-up world (REP-103), m/s^2."""
 
-# Layout of one link's row in the kernel's output table.
-_OMEGA, _ALPHA, _VELOCITY, _ACCEL, _COM_ACCEL, _POSITION = (slice(3 * k, 3 * k + 3) for k in range(6))
-_ROTATION = slice(18, 27)
+# Layout of one link's row in the kernel's output table: the kernel's per-link state, then com_accel.
+_OMEGA, _ALPHA, _VELOCITY, _ACCEL = (slice(3 * k, 3 * k + 3) for k in range(4))
+_ROTATION, _POSITION, _COM_ACCEL = slice(12, 21), slice(21, 24), slice(24, 27)
 _ROW = 27
 
 
@@ -121,9 +123,17 @@ def forward_recursion(
     root_accel = (-gx, -gy, -gz)  # a_0 = -g: the root is at rest, so it reads the specific force -g
     n_links = len(model.link_names)
     if q.ndim == 1:
-        flat = _recurse(model, q.tolist(), qd.tolist(), qdd.tolist(), root_accel, float, math.sin, math.cos)
-        table = np.array(flat, dtype=float).reshape(n_links, _ROW)
+        columns = q.tolist(), qd.tolist(), qdd.tolist()
+        if not math.isfinite(sum(columns[0]) + sum(columns[1]) + sum(columns[2])):
+            _check_finite(model, q, qd, qdd)  # names the culprit; a sum can also overflow
+        flat = _recurse(model, *columns, root_accel, float, math.sin, math.cos)
+        # struct packs a list of floats several times faster than np.array converts it.
+        packer = _packer(len(flat))
+        buffer = bytearray(packer.size)
+        packer.pack_into(buffer, 0, *flat)
+        table = np.frombuffer(buffer, dtype=float).reshape(n_links, _ROW)
     else:
+        _check_finite(model, q, qd, qdd)
         n_samples = q.shape[0]
 
         def constant(value: float) -> np.ndarray:
@@ -143,6 +153,14 @@ def forward_recursion(
         position=table[..., _POSITION],
         rotation=table[..., _ROTATION].reshape((*table.shape[:-1], 3, 3)),
     )
+
+
+@functools.lru_cache(maxsize=16)
+def _packer(count: int) -> struct.Struct:
+    return struct.Struct(f"{count}d")
+
+
+_FIXED, _PRISMATIC = JointKind.FIXED, JointKind.PRISMATIC
 
 
 def _recurse(
@@ -170,8 +188,7 @@ def _recurse(
          one, zero, zero, zero, one, zero, zero, zero, one, zero, zero, zero)
     ]  # fmt: skip
     # The root is at rest: its centre of mass has the root's acceleration wherever it is.
-    out: list[Any] = [zero, zero, zero, zero, zero, zero, zero, zero, zero, a0x, a0y, a0z, a0x, a0y, a0z]
-    out += [zero, zero, zero, one, zero, zero, zero, one, zero, zero, zero, one]
+    out: list[Any] = [*states[0], a0x, a0y, a0z]
 
     for link in range(1, len(model.link_names)):
         joint = model.parent_joints[link]
@@ -181,7 +198,7 @@ def _recurse(
 
         # Joint transform child -> parent at this q: rotation r.. and child origin (px, py, pz).
         kind = joint.kind
-        if kind is JointKind.FIXED:
+        if kind is _FIXED:
             r00, r01, r02, r10, r11, r12, r20, r21, r22 = joint.origin_rotation
             px, py, pz = joint.origin_xyz
         else:
@@ -191,24 +208,21 @@ def _recurse(
             else:
                 m = joint.multiplier
                 qj, qdj, qddj = m * q[k] + joint.offset, m * qd[k], m * qdd[k]
-            if kind is JointKind.PRISMATIC:
+            if kind is _PRISMATIC:
                 r00, r01, r02, r10, r11, r12, r20, r21, r22 = joint.origin_rotation
                 ox, oy, oz = joint.origin_xyz
                 dx, dy, dz = joint.axis_in_parent
                 px, py, pz = ox + qj * dx, oy + qj * dy, oz + qj * dz
             else:
+                # Rodrigues: origin_rotation + sin(qj) origin_rotation K + (1 - cos(qj)) origin_rotation K^2.
+                (o00, o01, o02, o10, o11, o12, o20, o21, o22,
+                 k00, k01, k02, k10, k11, k12, k20, k21, k22,
+                 m00, m01, m02, m10, m11, m12, m20, m21, m22) = joint.rotation_terms  # fmt: skip
                 s = sin(qj)
                 u = 1.0 - cos(qj)
-                c0, c1, c2 = joint.origin_rotation, joint.rotation_sin, joint.rotation_versine
-                r00 = c0[0] + s * c1[0] + u * c2[0]
-                r01 = c0[1] + s * c1[1] + u * c2[1]
-                r02 = c0[2] + s * c1[2] + u * c2[2]
-                r10 = c0[3] + s * c1[3] + u * c2[3]
-                r11 = c0[4] + s * c1[4] + u * c2[4]
-                r12 = c0[5] + s * c1[5] + u * c2[5]
-                r20 = c0[6] + s * c1[6] + u * c2[6]
-                r21 = c0[7] + s * c1[7] + u * c2[7]
-                r22 = c0[8] + s * c1[8] + u * c2[8]
+                r00, r01, r02 = o00 + s * k00 + u * m00, o01 + s * k01 + u * m01, o02 + s * k02 + u * m02
+                r10, r11, r12 = o10 + s * k10 + u * m10, o11 + s * k11 + u * m11, o12 + s * k12 + u * m12
+                r20, r21, r22 = o20 + s * k20 + u * m20, o21 + s * k21 + u * m21, o22 + s * k22 + u * m22
                 px, py, pz = joint.origin_xyz
 
         # In parent axes: omega_p x p, then v_p + omega_p x p and
@@ -230,11 +244,11 @@ def _recurse(
         ax, ay, az = (r00 * ax + r10 * ay + r20 * az, r01 * ax + r11 * ay + r21 * az, r02 * ax + r12 * ay + r22 * az)
 
         # The joint's own motion along its axis e (child frame).
-        if kind is not JointKind.FIXED:
+        if kind is not _FIXED:
             ex, ey, ez = joint.axis
             jx, jy, jz = qdj * ex, qdj * ey, qdj * ez  # qd z
             kx, ky, kz = qddj * ex, qddj * ey, qddj * ez  # qdd z
-            if kind is JointKind.PRISMATIC:
+            if kind is _PRISMATIC:
                 vx, vy, vz = vx + jx, vy + jy, vz + jz
                 ax = ax + kx + 2.0 * (wy * jz - wz * jy)
                 ay = ay + ky + 2.0 * (wz * jx - wx * jz)
@@ -267,10 +281,8 @@ def _recurse(
             pz0 + R20 * px + R21 * py + R22 * pz,
         )  # fmt: skip
         states.append(state)
-        out += state[:12]
+        out += state
         out += (acx, acy, acz)
-        out += state[21:24]
-        out += state[12:21]
     return out
 
 
@@ -291,21 +303,31 @@ def _check_joint_arrays(model: RobotModel, q: Any, qd: Any, qdd: Any) -> tuple[n
         raise InputError(
             f"q, qd and qdd must have the same shape; got {arrays[0].shape}, {arrays[1].shape}, {arrays[2].shape}"
         )
-    for name, array in zip(("q", "qd", "qdd"), arrays, strict=False):
-        bad = ~np.isfinite(array)
-        if bad.any():
-            index = tuple(int(i) for i in np.argwhere(bad)[0])
-            where = f"sample {index[0]}, " if array.ndim == 2 else ""
-            joint = model.joint_names[index[-1]]
-            raise InputError(f"{name} has a non-finite value ({array[index]}) at {where}joint {joint!r}")
     return arrays[0], arrays[1], arrays[2]
 
 
+def _check_finite(model: RobotModel, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
+    for name, values in (("q", q), ("qd", qd), ("qdd", qdd)):
+        bad = ~np.isfinite(values)
+        if bad.any():
+            index = tuple(int(i) for i in np.argwhere(bad)[0])
+            where = f"sample {index[0]}, " if values.ndim == 2 else ""
+            joint = model.joint_names[index[-1]]
+            raise InputError(f"{name} has a non-finite value ({values[index]}) at {where}joint {joint!r}")
+
+
 def _check_gravity(gravity: Sequence[float]) -> tuple[float, float, float]:
+    # Plain Python: this runs for every single sample, where numpy calls would dominate.
+    def problem() -> InputError:  # built only on error: repr of an array costs tens of microseconds
+        return InputError(f"gravity must be a finite 3-vector in the root frame (m/s^2), got {gravity!r}")
+
+    if isinstance(gravity, (str, bytes)) or (isinstance(gravity, np.ndarray) and gravity.shape != (3,)):
+        raise problem()
     try:
-        g = np.asarray(gravity, dtype=float)
+        gx, gy, gz = gravity
+        g = (float(gx), float(gy), float(gz))
     except (TypeError, ValueError) as exc:
-        raise InputError(f"gravity is not a 3-vector of numbers: {exc}") from exc
-    if g.shape != (3,) or not np.all(np.isfinite(g)):
-        raise InputError(f"gravity must be a finite 3-vector in the root frame (m/s^2), got {gravity!r}")
-    return float(g[0]), float(g[1]), float(g[2])
+        raise problem() from exc
+    if not all(math.isfinite(v) for v in g):
+        raise problem()
+    return g
