@@ -65,7 +65,8 @@ def demo_trajectory(model: RobotModel, times: np.ndarray) -> tuple[np.ndarray, n
 
 
 def _vector(values: np.ndarray) -> str:
-    return "(" + ", ".join(f"{v:8.3f}" for v in values) + ")"
+    # round() then + 0.0 so that round-off such as -1e-16 prints as 0.000, not -0.000
+    return "(" + ", ".join(f"{round(float(v), 3) + 0.0:8.3f}" for v in values) + ")"
 
 
 def run_demo(urdf: str | None, seconds: float, samples: int) -> None:
@@ -115,6 +116,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (NeforwardError, FileNotFoundError) as exc:
         print(f"neforward: error: {exc}", file=sys.stderr)
         return 1
+    except BrokenPipeError:  # output piped into `head` and the like
+        sys.stderr.close()
+        return 0
     return 0
 
 
