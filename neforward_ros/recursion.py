@@ -264,12 +264,12 @@ def _recurse(
         if rx == 0.0 and ry == 0.0 and rz == 0.0:
             acx, acy, acz = ax, ay, az
         else:
-            ox = wy * rz - wz * ry
-            oy = wz * rx - wx * rz
-            oz = wx * ry - wy * rx
-            acx = ax + (aly * rz - alz * ry) + (wy * oz - wz * oy)
-            acy = ay + (alz * rx - alx * rz) + (wz * ox - wx * oz)
-            acz = az + (alx * ry - aly * rx) + (wx * oy - wy * ox)
+            wrx = wy * rz - wz * ry  # omega x r
+            wry = wz * rx - wx * rz
+            wrz = wx * ry - wy * rx
+            acx = ax + (aly * rz - alz * ry) + (wy * wrz - wz * wry)
+            acy = ay + (alz * rx - alx * rz) + (wz * wrx - wx * wrz)
+            acz = az + (alx * ry - aly * rx) + (wx * wry - wy * wrx)
 
         # Pose in the root frame: R_root = R_root_parent @ R, p_root = p_root_parent + R_root_parent @ p.
         state = (
