@@ -8,27 +8,7 @@ import pytest
 from neforward_ros import InputError
 from neforward_ros.derivatives import estimate_derivatives
 
-# Reference signal of the issue: a sum of sinusoids 0.2-1.6 Hz, amplitudes 0.05-0.8 rad.
-AMPLITUDE = np.array([0.8, 0.3, 0.05])
-FREQUENCY = np.array([0.2, 0.7, 1.6])
-PHASE = np.array([0.3, 1.1, 2.0])
-
-
-def reference(t: np.ndarray, shift: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    w = 2 * np.pi * FREQUENCY
-    arg = np.outer(t, w) + PHASE + shift
-    q = (AMPLITUDE * np.sin(arg)).sum(1)
-    return q, (AMPLITUDE * w * np.cos(arg)).sum(1), (-AMPLITUDE * w**2 * np.sin(arg)).sum(1)
-
-
-def jittered_stamps(n: int, rate: float = 500.0, jitter: float = 0.1, seed: int = 0) -> np.ndarray:
-    rng = np.random.default_rng(seed)
-    return (np.arange(n) + rng.uniform(-jitter, jitter, n)) / rate
-
-
-def relative_rms(estimate: np.ndarray, truth: np.ndarray, part: slice = slice(None)) -> float:
-    return float(np.sqrt(np.mean((estimate[part] - truth[part]) ** 2)) / np.sqrt(np.mean(truth[part] ** 2)))
-
+from conftest import jittered_stamps, reference, relative_rms
 
 INTERIOR = slice(100, -100)  # 0.2 s from either end
 

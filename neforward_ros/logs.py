@@ -1,0 +1,72 @@
+"""Logging for transport-free code: an injectable log function, once-only and throttled messages.
+
+The core never imports rclpy or a DDS library. It logs through a plain function
+``log(level, message)``, where level is a :mod:`logging` level (``logging.WARNING``, ...). Each runtime
+passes its own: the rclpy adapter maps it to the node's logger, and the default is a Python
+:class:`logging.Logger`. Bad input that repeats at the message rate is throttled here, per kind of
+problem, so a broken driver cannot flood the log.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Hashable
+
+LogFunction = Callable[[int, str], None]
+"""``log(level, message)`` with a :mod:`logging` level."""
+
+DEFAULT_THROTTLE_PERIOD = 5.0
+"""Seconds between two messages of the same kind."""
+
+
+def python_log(name: str = "neforward_ros") -> LogFunction:
+    """A log function writing to the Python logger ``name``."""
+    return logging.getLogger(name).log
+
+
+class ThrottledLog:
+    """Once-only and rate-limited messages, keyed by the kind of problem.
+
+    Args:
+        log: where messages go; the Python logger ``neforward_ros`` by default.
+        period: seconds between two messages with the same key (``every``).
+        clock: monotonic seconds; injectable for tests.
+    """
+
+    def __init__(
+        self,
+        log: LogFunction | None = None,
+        period: float = DEFAULT_THROTTLE_PERIOD,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self._log = log if log is not None else python_log()
+        self._period = period
+        self._clock = clock
+        self._said: set[Hashable] = set()
+        self._last: dict[Hashable, float] = {}
+        self._suppressed: dict[Hashable, int] = {}
+
+    def log(self, level: int, message: str) -> None:
+        """Log unconditionally."""
+        self._log(level, message)
+
+    def once(self, key: Hashable, level: int, message: str) -> bool:
+        """Log ``message`` the first time ``key`` is seen, never again. Returns whether it was logged."""
+        if key in self._said:
+            return False
+        self._said.add(key)
+        self._log(level, message)
+        return True
+
+    def every(self, key: Hashable, level: int, message: str) -> bool:
+        """Log at most once per period for ``key``, saying how many were suppressed in between."""
+        now = self._clock()
+        last = self._last.get(key)
+        if last is not None and now - last < self._period:
+            self._suppressed[key] = self._suppressed.get(key, 0) + 1
+            return False
+        skipped = self._suppressed.pop(key, 0)
+        self._last[key] = now
+        self._log(level, f"{message} ({skipped} more like this since the last report)" if skipped else message)
+        return True
