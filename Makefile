@@ -15,6 +15,7 @@ test: $(VENV)/.installed-test
 
 bench: $(VENV)/.installed-test
 	$(BIN)/python bench/bench_recursion.py
+	$(BIN)/python bench/bench_stream.py
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)

@@ -13,6 +13,11 @@ encoder-level noise. On the reference test signal (sum of sinusoids 0.2-1.6 Hz, 
 stamp jitter) q-ddot is within 2e-3 relative RMS noise-free and 2 % with 1e-4 rad noise; the
 README gives the measured figures.
 
+:func:`estimate_derivatives` works on a whole recording (it may look ahead); :class:`StreamingEstimator`
+takes one joint-state message at a time, for the node, in a causal mode (estimate at the newest
+sample) or a fixed-lag mode (estimate ``lag`` seconds back, equal to the whole-recording estimate on
+interior samples).
+
 Time: stamps may be float seconds, or integer nanoseconds (as ``builtin_interfaces/Time`` gives
 them), which keeps epoch-sized stamps exact. All arithmetic is done relative to the first stamp.
 """
@@ -20,6 +25,7 @@ them), which keeps epoch-sized stamps exact. All arithmetic is done relative to 
 from __future__ import annotations
 
 import logging
+import math
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -378,6 +384,11 @@ class StreamingEstimator:
         self._ignored = frozenset(ignored_names)
         self._log = ThrottledLog(log)
         self._histories = [_History() for _ in self.joint_names]
+        # Joints with the same lineage have received exactly the same stamps since their histories
+        # last restarted (one driver's joints), so they are fitted together. 0: empty history.
+        self._lineage = [0] * len(self.joint_names)
+        self._lineages = 0
+        self._targets = 0
         self._lag_ns = round(self.settings.effective_lag * _NS)
         self._gap_ns = round(self.settings.max_gap * _NS)
         self._keep_ns = round((self.settings.window + self.settings.effective_lag) * _NS) + self._gap_ns
@@ -420,6 +431,7 @@ class StreamingEstimator:
         """Forget every history (a new stream starts)."""
         for history in self._histories:
             history.clear()
+        self._lineage = [0] * len(self.joint_names)
         self._pending.clear()
         self._clock = None
 
@@ -473,11 +485,19 @@ class StreamingEstimator:
             new_target = stamp > self._clock
         added = False
         restarted: list[str] = []
+        successors: dict[int, int] = {}
         for j, position, velocity, acceleration in samples:
             result = self._add(j, stamp, position, velocity, acceleration)
-            added |= result is not None
+            if result is None:
+                continue
+            added = True
             if result:
                 restarted.append(f"{self.joint_names[j]!r} ({result})")
+            before = -1 if result else self._lineage[j]  # -1: restarted in this message
+            if before not in successors:
+                self._lineages += 1
+                successors[before] = self._lineages
+            self._lineage[j] = successors[before]
         if restarted:
             self._log.every("restart", logging.WARNING, f"history restarted for joint {', '.join(restarted)}")
         if not added:
@@ -486,8 +506,10 @@ class StreamingEstimator:
             self._clock = stamp
             self._pending.append(stamp)
             out.extend(self._estimate(target) for target in self._drain(stamp - self._lag_ns))
-            for history in self._histories:
-                history.drop_before(stamp - self._keep_ns, self.settings.order + 2)
+            self._targets += 1
+            if self._targets % 32 == 0:  # forget old samples now and then; joints of one lineage alike
+                for history in self._histories:
+                    history.drop_before(stamp - self._keep_ns, self.settings.order + 2)
         return out
 
     def _read_message(
@@ -515,6 +537,11 @@ class StreamingEstimator:
             if not np.all(np.isfinite(field)):
                 self._log.every(("nan", what), logging.WARNING, f"joint state with non-finite {what}: those dropped")
             given[:, column] = field
+        given[~np.isfinite(given)] = np.nan
+        if self.settings.velocity_source == "differentiate":
+            given[:, 0] = np.nan
+        velocity, acceleration = given.T.tolist()
+        position = position.tolist()
         samples = []
         for k, name in enumerate(names):
             j = self._index.get(name)
@@ -524,13 +551,10 @@ class StreamingEstimator:
                         ("unknown", name), logging.WARNING, f"joint state names unknown joint {name!r}, ignored"
                     )
                 continue
-            if not np.isfinite(position[k]):
+            if not math.isfinite(position[k]):
                 self._log.every(("nan", name), logging.WARNING, f"joint {name!r}: non-finite position, sample dropped")
                 continue
-            v, a = (float(x) if np.isfinite(x) else np.nan for x in given[k])
-            if self.settings.velocity_source == "differentiate":
-                v = np.nan
-            samples.append((j, float(position[k]), v, a))
+            samples.append((j, position[k], velocity[k], acceleration[k]))
         return samples
 
     def _floats(self, values: Sequence[float], what: str, count: int) -> np.ndarray | None:
@@ -586,64 +610,8 @@ class StreamingEstimator:
         n = len(self.joint_names)
         state = np.full((n, 3), np.nan)
         ages = np.full(n, np.inf)
-        settings = self.settings
-        half_width = settings.window / 2.0
-        lead_ns = self._lag_ns if settings.mode == "fixed_lag" else 0
-        lead = lead_ns / _NS
-        target_s = (target - self._origin) / _NS
-        groups: dict[tuple, list[int]] = {}
-        for j, history in enumerate(self._histories):
-            count = len(history)
-            if not count:
-                continue
-            stamps = history.stamps
-            k = int(np.searchsorted(stamps, target, side="right")) - 1
-            if k < 0:
-                continue
-            age_ns = target - int(stamps[k])
-            ages[j] = age_ns / _NS
-            if age_ns > self._gap_ns:
-                continue
-            data = history.data
-            exact = age_ns == 0
-            if exact and np.all(np.isfinite(data[k])):  # supplied acceleration: no estimation
-                state[j] = data[k]
-                continue
-            lo = int(np.searchsorted(stamps, target + lead_ns - round(settings.window * _NS), side="left"))
-            hi = int(np.searchsorted(stamps, target + lead_ns, side="right"))
-            from_velocity = bool(np.all(np.isfinite(data[lo:hi, 1]))) and hi - lo >= 2
-            if not from_velocity and count < 3:
-                continue
-            key = (from_velocity, count, int(stamps[0]), int(stamps[-1]))
-            group = groups.setdefault(key, [])
-            if group and not np.array_equal(self._histories[group[0]].stamps, stamps):
-                key = (*key, j)  # same ends, different samples: fit apart
-                group = groups.setdefault(key, [])
-            group.append(j)
-            if exact:  # the sample itself rather than a fit, for what the message gave
-                state[j, 0], state[j, 1] = data[k, 0], data[k, 1]
-        for (from_velocity, *_), joints in groups.items():
-            history = self._histories[joints[0]]
-            times = (history.stamps - self._origin) / _NS
-            column = 1 if from_velocity else 0
-            values = np.stack([self._histories[j].data[:, column] for j in joints], axis=1)
-            if settings.method == "difference":
-                fitted, d1, d2 = _local_difference(times, values, target_s, lead)
-            else:
-                degree = settings.order - 1 if from_velocity else settings.order
-                fitted, d1, d2 = local_polynomial(times, values, np.array([target_s]), half_width, degree, lead)
-                fitted, d1, d2 = fitted[0], d1[0], d2[0]
-            for column_index, j in enumerate(joints):
-                if from_velocity:
-                    state[j, 2] = d1[column_index]
-                    if np.isnan(state[j, 1]):
-                        state[j, 1] = fitted[column_index]
-                    if np.isnan(state[j, 0]):
-                        state[j, 0] = self._position_at(j, target_s, lead)
-                else:
-                    if np.isnan(state[j, 0]):
-                        state[j, 0] = fitted[column_index]
-                    state[j, 1], state[j, 2] = d1[column_index], d2[column_index]
+        for members in self._same_stamp_groups():
+            self._estimate_group(target, members, state, ages)
         ready = np.all(np.isfinite(state), axis=1)
         state[~ready] = np.nan
         return JointEstimate(
@@ -656,16 +624,62 @@ class StreamingEstimator:
             ready=ready,
         )
 
-    def _position_at(self, j: int, target_s: float, lead: float) -> float:
-        """Position of joint j at the target from its own samples (a fit; the sample if only one)."""
-        history = self._histories[j]
-        times = (history.stamps - self._origin) / _NS
-        if len(times) == 1:
-            return float(history.data[0, 0])
-        fitted, _, _ = local_polynomial(
-            times, history.data[:, :1], np.array([target_s]), self.settings.window / 2.0, self.settings.order, lead
-        )
-        return float(fitted[0, 0])
+    def _same_stamp_groups(self) -> list[list[int]]:
+        """Joints whose histories hold exactly the same stamps (one driver's joints): fitted together."""
+        groups: dict[int, list[int]] = {}
+        for j, lineage in enumerate(self._lineage):
+            if lineage:
+                groups.setdefault(lineage, []).append(j)
+        return list(groups.values())
+
+    def _estimate_group(self, target: int, members: list[int], state: np.ndarray, ages: np.ndarray) -> None:
+        """Fill state (n, 3) and ages (n,) at the target for joints sharing the same sample stamps."""
+        settings = self.settings
+        stamps = self._histories[members[0]].stamps
+        k = int(np.searchsorted(stamps, target, side="right")) - 1
+        if k < 0:
+            return
+        age_ns = target - int(stamps[k])
+        ages[members] = age_ns / _NS
+        if age_ns > self._gap_ns:
+            return  # stale: not ready
+        data = np.stack([self._histories[j].data for j in members])  # (m, count, 3)
+        exact = age_ns == 0
+        if exact:  # the sample itself rather than a fit, for what the message gave
+            state[members] = data[:, k]  # supplied accelerations (finite) bypass the estimate below
+        lead_ns = self._lag_ns if settings.mode == "fixed_lag" else 0
+        lo = int(np.searchsorted(stamps, target + lead_ns - round(settings.window * _NS), side="left"))
+        hi = int(np.searchsorted(stamps, target + lead_ns, side="right"))
+        from_velocity = np.all(np.isfinite(data[:, lo:hi, 1]), axis=1) & (hi - lo >= 2)
+        needs = ~np.isfinite(state[members, 2])
+        if len(stamps) < 3:
+            needs &= from_velocity
+        if not np.any(needs):
+            return
+        estimated = [j for j, need in zip(members, needs, strict=True) if need]
+        by_velocity = from_velocity[needs]
+        values = np.concatenate([data[needs, :, 0], data[needs][by_velocity, :, 1]]).T  # (count, columns)
+        times = (stamps - self._origin) / _NS
+        target_s = (target - self._origin) / _NS
+        if settings.method == "difference":
+            fitted, d1, d2 = _local_difference(times, values, target_s, lead_ns / _NS)
+        else:
+            fit = local_polynomial(
+                times, values, np.array([target_s]), settings.window / 2.0, settings.order, lead_ns / _NS
+            )
+            fitted, d1, d2 = (x[0] for x in fit)
+        m = len(estimated)
+        velocity_column = m + np.cumsum(by_velocity) - 1
+        for column, j in enumerate(estimated):
+            if by_velocity[column]:
+                fitted_velocity, acceleration = fitted[velocity_column[column]], d1[velocity_column[column]]
+            else:
+                fitted_velocity, acceleration = d1[column], d2[column]
+            if not exact:
+                state[j, 0] = fitted[column]
+            if not (exact and np.isfinite(state[j, 1])):  # a message velocity is kept as given
+                state[j, 1] = fitted_velocity
+            state[j, 2] = acceleration
 
 
 def _local_difference(

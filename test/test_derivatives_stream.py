@@ -356,7 +356,16 @@ def test_random_message_sequences_never_raise_never_emit_nan_for_ready_joints(se
             positions = positions[:-1]  # sometimes a length mismatch
         velocities = {"none": [], "same": list(reversed(positions)), "short": positions[:1]}[velocity_kind]
         out += estimator.update(stamp, names, positions, velocities)
-    out += estimator.flush()
+    # Then, after more than max_gap, clean input: a constant acceleration of 2 on every joint.
+    restart = max([stamp, *(e.stamp_ns for e in out)]) + 600_000_000
+    clean = []
+    for k in range(12):
+        tk = k * 0.002
+        clean += estimator.update(restart + k * 2_000_000, ["a", "b", "c"], [tk * tk, 0.1 + tk * tk, tk * tk])
+    clean += estimator.flush()
+    assert clean and clean[-1].all_ready
+    np.testing.assert_allclose(clean[-1].accelerations, 2.0, rtol=1e-6)
+    out += clean
     for estimate in out:
         finite = (
             np.isfinite(estimate.positions) & np.isfinite(estimate.velocities) & np.isfinite(estimate.accelerations)
