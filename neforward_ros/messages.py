@@ -1,0 +1,207 @@
+"""ROS 2 message contents built from results: the one place messages are built.
+
+Every builder returns the message as nested dicts and lists keyed by the ROS 2 field names
+(``{"header": {"stamp": {"sec": ..., "nanosec": ...}, "frame_id": ...}, ...}``), with fields left
+out where the message default is meant. Each runtime turns these into its own message objects:
+the rclpy adapter with ``rosidl_runtime_py.set_message_fields``, the DDS runtime and the bag tool
+through :mod:`neforward_ros.rostypes`. So the rclpy node, the no-ROS node and the bag output carry
+the same numbers in the same fields.
+
+Frames and points (see the README topic table):
+- link_states / com_states (trajectory_msgs/MultiDOFJointTrajectory): poses, twists and
+  accelerations of each link origin / centre of mass, every vector along the root frame's axes,
+  ``header.frame_id`` the root link.
+- <link>/accel, <link>/twist: the link origin's, in the link frame.
+- <link>/imu: angular velocity and specific force in the link frame; orientation of the link in
+  the root frame.
+Linear accelerations are classical (not spatial) accelerations minus gravity: the specific force an
+accelerometer reads; with gravity set to zero they are kinematic accelerations.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from neforward_ros.pipeline import Result
+
+Message = dict[str, Any]
+
+LINK_STATES_TYPE = "trajectory_msgs/msg/MultiDOFJointTrajectory"
+ACCEL_TYPE = "geometry_msgs/msg/AccelStamped"
+TWIST_TYPE = "geometry_msgs/msg/TwistStamped"
+IMU_TYPE = "sensor_msgs/msg/Imu"
+MARKERS_TYPE = "visualization_msgs/msg/MarkerArray"
+JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
+JOINT_TRAJECTORY_TYPE = "trajectory_msgs/msg/JointTrajectory"
+STRING_TYPE = "std_msgs/msg/String"
+
+MARKER_NAMESPACE = "com_accel"
+_ARROW = 0  # visualization_msgs/Marker ARROW
+_ADD = 0  # visualization_msgs/Marker ADD
+_NS = 1_000_000_000
+
+
+def time(stamp_ns: int) -> Message:
+    """builtin_interfaces/Time from integer nanoseconds."""
+    sec, nanosec = divmod(int(stamp_ns), _NS)
+    return {"sec": sec, "nanosec": nanosec}
+
+
+def stamp_ns(time_message: Any) -> int:
+    """Integer nanoseconds from a builtin_interfaces/Time (an object with sec, nanosec, or its dict)."""
+    if isinstance(time_message, dict):
+        return int(time_message["sec"]) * _NS + int(time_message["nanosec"])
+    return int(time_message.sec) * _NS + int(time_message.nanosec)
+
+
+def header(stamp: int, frame_id: str) -> Message:
+    return {"stamp": time(stamp), "frame_id": frame_id}
+
+
+def vector3(v: np.ndarray) -> Message:
+    x, y, z = v.tolist()
+    return {"x": x, "y": y, "z": z}
+
+
+def quaternions(rotations: np.ndarray) -> np.ndarray:
+    """Unit quaternions (x, y, z, w) with w >= 0 of rotation matrices, shape (..., 3, 3) -> (..., 4)."""
+    r = np.asarray(rotations, dtype=float)
+    trace = r[..., 0, 0] + r[..., 1, 1] + r[..., 2, 2]
+    # Four candidate formulas, each accurate where its pivot (4 w^2, 4 x^2, 4 y^2 or 4 z^2) is largest.
+    pivots = np.stack(
+        [1.0 + trace, 1.0 + 2 * r[..., 0, 0] - trace, 1.0 + 2 * r[..., 1, 1] - trace, 1.0 + 2 * r[..., 2, 2] - trace],
+        axis=-1,
+    )
+    best = np.argmax(pivots, axis=-1)
+    s = 2.0 * np.sqrt(np.maximum(np.take_along_axis(pivots, best[..., None], axis=-1)[..., 0], 1e-300))
+    d21, d02, d10 = r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0], r[..., 1, 0] - r[..., 0, 1]
+    s21, s02, s10 = r[..., 2, 1] + r[..., 1, 2], r[..., 0, 2] + r[..., 2, 0], r[..., 1, 0] + r[..., 0, 1]
+    candidates = np.stack(
+        [
+            np.stack([d21 / s, d02 / s, d10 / s, s / 4], axis=-1),
+            np.stack([s / 4, s10 / s, s02 / s, d21 / s], axis=-1),
+            np.stack([s10 / s, s / 4, s21 / s, d02 / s], axis=-1),
+            np.stack([s02 / s, s21 / s, s / 4, d10 / s], axis=-1),
+        ],
+        axis=-2,
+    )
+    q = np.take_along_axis(candidates, best[..., None, None], axis=-2)[..., 0, :]
+    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.where(q[..., 3:4] < 0.0, -q, q)
+
+
+def _quaternion(q: np.ndarray) -> Message:
+    x, y, z, w = q.tolist()
+    return {"x": x, "y": y, "z": z, "w": w}
+
+
+def _multi_dof(
+    result: Result,
+    frame_prefix: str,
+    positions: np.ndarray,
+    linear_velocities: np.ndarray,
+    linear_accelerations: np.ndarray,
+) -> Message:
+    root = result.in_root
+    rotations = quaternions(root.rotation)
+    transforms, velocities, accelerations = [], [], []
+    for k in range(len(result.link_names)):
+        transforms.append({"translation": vector3(positions[k]), "rotation": _quaternion(rotations[k])})
+        velocities.append({"linear": vector3(linear_velocities[k]), "angular": vector3(root.omega[k])})
+        accelerations.append({"linear": vector3(linear_accelerations[k]), "angular": vector3(root.alpha[k])})
+    return {
+        "header": header(result.stamp_ns, frame_prefix + result.root_link),
+        "joint_names": list(result.link_names),
+        "points": [
+            {
+                "transforms": transforms,
+                "velocities": velocities,
+                "accelerations": accelerations,
+                "time_from_start": {"sec": 0, "nanosec": 0},
+            }
+        ],
+    }
+
+
+def link_states(result: Result, frame_prefix: str = "") -> Message:
+    """trajectory_msgs/MultiDOFJointTrajectory: for each link (``joint_names`` = link names), the pose of
+    its frame in the root frame, the twist (v of the origin, omega) and the acceleration (specific
+    force at the origin, alpha), vectors along the root axes; one point, stamped with the input's stamp."""
+    root = result.in_root
+    return _multi_dof(result, frame_prefix, root.position, root.velocity, root.accel)
+
+
+def com_states(result: Result, frame_prefix: str = "") -> Message:
+    """As :func:`link_states` for each link's centre of mass: translation = the COM in the root frame
+    (rotation = the link's), twist and acceleration of the COM point, along the root axes."""
+    return _multi_dof(
+        result, frame_prefix, result.com_position_in_root, result.com_velocity_in_root, result.in_root.com_accel
+    )
+
+
+def accel_stamped(result: Result, link: int, frame_prefix: str = "") -> Message:
+    """geometry_msgs/AccelStamped of the link origin in the link frame: linear = specific force, angular = alpha."""
+    kin = result.in_link
+    return {
+        "header": header(result.stamp_ns, frame_prefix + result.link_names[link]),
+        "accel": {"linear": vector3(kin.accel[link]), "angular": vector3(kin.alpha[link])},
+    }
+
+
+def twist_stamped(result: Result, link: int, frame_prefix: str = "") -> Message:
+    """geometry_msgs/TwistStamped of the link origin in the link frame: linear = v, angular = omega."""
+    kin = result.in_link
+    return {
+        "header": header(result.stamp_ns, frame_prefix + result.link_names[link]),
+        "twist": {"linear": vector3(kin.velocity[link]), "angular": vector3(kin.omega[link])},
+    }
+
+
+def imu(result: Result, link: int, frame_prefix: str = "") -> Message:
+    """sensor_msgs/Imu of an ideal IMU at the link origin, axes along the link frame.
+
+    orientation: the link frame's orientation in the root frame. angular_velocity: omega in the link
+    frame. linear_acceleration: the specific force in the link frame (+9.81 m/s^2 upward at rest, as
+    a real accelerometer reads). Covariances are all zero, which sensor_msgs/Imu defines as
+    "covariance unknown": the values are exact for the model, with no sensor noise model.
+    """
+    kin = result.in_link
+    zeros = [0.0] * 9
+    return {
+        "header": header(result.stamp_ns, frame_prefix + result.link_names[link]),
+        "orientation": _quaternion(quaternions(kin.rotation[link])),
+        "orientation_covariance": zeros,
+        "angular_velocity": vector3(kin.omega[link]),
+        "angular_velocity_covariance": list(zeros),
+        "linear_acceleration": vector3(kin.accel[link]),
+        "linear_acceleration_covariance": list(zeros),
+    }
+
+
+def markers(result: Result, frame_prefix: str = "", scale: float = 0.02) -> Message:
+    """visualization_msgs/MarkerArray: per link an ARROW from its centre of mass along its COM
+    acceleration (specific force), ``scale`` m per m/s^2, in the root frame; id = link index."""
+    root = result.in_root
+    out = []
+    frame = frame_prefix + result.root_link
+    for k in range(len(result.link_names)):
+        start = result.com_position_in_root[k]
+        end = start + scale * root.com_accel[k]
+        out.append(
+            {
+                "header": header(result.stamp_ns, frame),
+                "ns": MARKER_NAMESPACE,
+                "id": k,
+                "type": _ARROW,
+                "action": _ADD,
+                "pose": {"orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+                "scale": {"x": 0.01, "y": 0.02, "z": 0.0},  # shaft and head diameter; default head length
+                "color": {"r": 1.0, "g": 0.4, "b": 0.0, "a": 1.0},
+                "points": [vector3(start), vector3(end)],
+                "text": result.link_names[k],
+            }
+        )
+    return {"markers": out}

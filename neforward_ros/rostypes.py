@@ -1,0 +1,117 @@
+"""ROS 2 Jazzy message types without ROS: message contents <-> rosbags objects and CDR bytes.
+
+The definitions come from the ``rosbags`` type store for ROS 2 Jazzy (a maintained copy of the ROS 2
+message definitions), so field names, types and layout are not hand-mirrored here. The message
+contents are the nested dicts of :mod:`neforward_ros.messages`; fields left out take the message
+defaults (zero, empty), as in rclpy.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from functools import cache
+from typing import Any
+
+import numpy as np
+
+from neforward_ros.errors import InputError
+
+_DTYPES = {
+    "bool": np.bool_,
+    "byte": np.uint8,
+    "char": np.uint8,
+    "uint8": np.uint8,
+    "int8": np.int8,
+    "uint16": np.uint16,
+    "int16": np.int16,
+    "uint32": np.uint32,
+    "int32": np.int32,
+    "uint64": np.uint64,
+    "int64": np.int64,
+    "float32": np.float32,
+    "float64": np.float64,
+}
+
+
+@cache
+def typestore() -> Any:
+    """The rosbags type store of ROS 2 Jazzy."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def to_ros(typename: str, contents: Mapping[str, Any] | None = None) -> Any:
+    """A rosbags message object of ``typename`` (``pkg/msg/Type``) from message contents.
+
+    Raises:
+        InputError: an unknown type or field, or a value that does not fit its field.
+    """
+    store = typestore()
+    if typename not in store.fielddefs:
+        raise InputError(f"unknown ROS 2 message type {typename!r}")
+    contents = {} if contents is None else contents
+    _, fields = store.fielddefs[typename]
+    names = {name for name, _ in fields}
+    unknown = sorted(set(contents) - names)
+    if unknown:
+        raise InputError(f"{typename} has no field(s) {', '.join(unknown)}")
+    values = {}
+    for name, (nodetype, description) in fields:
+        try:
+            values[name] = _convert(nodetype, description, contents.get(name))
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{typename}.{name}: {exc}") from exc
+    return store.types[typename](**values)
+
+
+def _convert(nodetype: Any, description: Any, value: Any) -> Any:
+    kind = int(nodetype)  # rosbags Nodetype: BASE 1, NAME 2, ARRAY 3, SEQUENCE 4
+    if kind == 2:
+        return to_ros(description, value)
+    if kind == 1:
+        base = description[0]
+        if base == "string":
+            return "" if value is None else str(value)
+        dtype = _DTYPES[base]
+        if value is None:
+            return dtype(0).item()
+        return bool(value) if base == "bool" else dtype(value).item()
+    (element_type, element_description), length = description
+    items = [] if value is None else value
+    if int(element_type) == 1 and element_description[0] != "string":
+        array = np.asarray(items, dtype=_DTYPES[element_description[0]])
+        if kind == 3 and value is None:
+            array = np.zeros(length, dtype=array.dtype)
+        if kind == 3 and array.shape != (length,):
+            raise ValueError(f"expected {length} values, got {array.shape}")
+        return array
+    converted = [_convert(element_type, element_description, item) for item in items]
+    if kind == 3 and value is None:
+        converted = [_convert(element_type, element_description, None) for _ in range(length)]
+    return converted
+
+
+def to_contents(message: Any) -> Any:
+    """Message contents (dicts, lists, numbers, strings) of a rosbags message object."""
+    if hasattr(message, "__msgtype__"):
+        return {
+            name: to_contents(getattr(message, name))
+            for name in message.__dataclass_fields__
+            if not name.startswith("__")
+        }
+    if isinstance(message, np.ndarray):
+        return message.tolist()
+    if isinstance(message, list):
+        return [to_contents(item) for item in message]
+    return message
+
+
+def serialize(typename: str, contents: Mapping[str, Any]) -> bytes:
+    """CDR bytes (with the 4-byte encapsulation header, as ROS 2 puts on the wire and in bags)."""
+    return bytes(typestore().serialize_cdr(to_ros(typename, contents), typename))
+
+
+def deserialize(typename: str, data: bytes) -> dict[str, Any]:
+    """Message contents from CDR bytes."""
+    return to_contents(typestore().deserialize_cdr(data, typename))
