@@ -12,10 +12,11 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", glob("config/*")),
+        ("share/" + package_name + "/launch", glob("launch/*.launch.py")),
     ],
     python_requires=">=3.11",
-    install_requires=["setuptools", "numpy>=1.26", "yourdfpy>=0.0.56"],
-    extras_require={"test": ["pytest>=7", "pin>=3.4", "hypothesis>=6", "ruff>=0.6"]},
+    install_requires=["setuptools", "numpy>=1.26", "yourdfpy>=0.0.56", "pyyaml>=6", "rosbags>=0.10"],
+    extras_require={"test": ["pytest>=7", "pin>=3.4", "hypothesis>=6", "scipy>=1.11", "ruff>=0.6"]},
     zip_safe=True,
     maintainer="neforward_ros developers",
     maintainer_email="neforward-ros@example.com",
@@ -23,5 +24,7 @@ setup(
     "(Newton-Euler forward recursion) for ROS 2.",
     license="Apache-2.0",
     tests_require=["pytest"],
-    entry_points={"console_scripts": ["neforward = neforward_ros.cli:main"]},
+    entry_points={
+        "console_scripts": ["neforward = neforward_ros.cli:main", "neforward_node = neforward_ros.ros_node:main"]
+    },
 )

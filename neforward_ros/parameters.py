@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from neforward_ros.derivatives import (
@@ -167,6 +168,45 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         frame_prefix=merged["frame_prefix"],
         qos_depth=merged["qos_depth"],
     )
+
+
+def load_params_file(path: str | Path, node_name: str = NODE_NAME) -> dict[str, Any]:
+    """Parameter values for ``node_name`` from a ROS 2 params file.
+
+    The file maps node names (``neforward``, ``/neforward``, a namespaced ``/ns/neforward`` or the
+    wildcard ``/**``) to ``ros__parameters``; nested mappings give dotted names
+    (``estimator: {window: 0.2}`` is ``estimator.window``). Entries for other nodes are ignored.
+
+    Raises:
+        InputError: the file is missing or is not such YAML.
+    """
+    import yaml
+
+    try:
+        document = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise InputError(f"cannot read params file {path}: {exc}") from exc
+    if not isinstance(document, dict):
+        raise InputError(f"params file {path} is not a mapping of node names to ros__parameters")
+    values: dict[str, Any] = {}
+    for key, entry in document.items():
+        name = str(key).rstrip("/")
+        if name not in ("/**", node_name, f"/{node_name}") and not name.endswith(f"/{node_name}"):
+            continue
+        if not isinstance(entry, dict) or not isinstance(entry.get("ros__parameters"), dict):
+            raise InputError(f"params file {path}: {key} has no ros__parameters mapping")
+        values.update(_flatten(entry["ros__parameters"]))
+    return values
+
+
+def _flatten(mapping: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in mapping.items():
+        if isinstance(value, dict):
+            out.update(_flatten(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
 
 
 def _check_type(parameter: Parameter, value: Any) -> Any:
