@@ -117,9 +117,7 @@ class RobotModel:
     @property
     def mimic_joint_names(self) -> tuple[str, ...]:
         """Movable joints that follow another joint (not columns of q), in link order."""
-        return tuple(
-            j.name for j in self.parent_joints if j is not None and j.mimic_of is not None
-        )
+        return tuple(j.name for j in self.parent_joints if j is not None and j.mimic_of is not None)
 
 
 _SUPPORTED_TYPES = {kind.value: kind for kind in JointKind}
@@ -214,8 +212,7 @@ def _build_model(robot, root_link: str | None) -> RobotModel:
         if joint.child in parent_joint_of:
             other = parent_joint_of[joint.child].name
             raise ModelError(
-                f"link {joint.child!r} is the child of two joints, {other!r} and {joint.name!r}: "
-                "a URDF must be a tree"
+                f"link {joint.child!r} is the child of two joints, {other!r} and {joint.name!r}: a URDF must be a tree"
             )
         parent_joint_of[joint.child] = joint
 
@@ -246,17 +243,13 @@ def _build_model(robot, root_link: str | None) -> RobotModel:
     in_tree = {j.name for j in tree_joints if j is not None}
     for joint in tree_joints[1:]:
         _check_joint_type(joint)
-    movable = [
-        j for j in robot.joints if j.name in in_tree and _SUPPORTED_TYPES[j.type] is not JointKind.FIXED
-    ]
+    movable = [j for j in robot.joints if j.name in in_tree and _SUPPORTED_TYPES[j.type] is not JointKind.FIXED]
     independent = [j.name for j in movable if j.mimic is None]
     joint_index = {name: i for i, name in enumerate(independent)}
 
     parent_joints: list[ParentJoint | None] = [None]
     for joint in tree_joints[1:]:
-        parent_joints.append(
-            _parent_joint(joint, link_index[joint.parent], joint_by_name, joint_index, in_tree)
-        )
+        parent_joints.append(_parent_joint(joint, link_index[joint.parent], joint_by_name, joint_index, in_tree))
 
     com_in_link = tuple(_com(link_by_name[name]) for name in link_names)
     return RobotModel(

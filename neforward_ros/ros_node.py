@@ -52,8 +52,8 @@ class NeforwardNode(Node):
             self.declare_parameter(parameter.name, parameter.default, descriptor)
         values = {p.name: _plain(self.get_parameter(p.name).value) for p in PARAMETERS}
         self.settings = node_settings(values)
-        self.pipeline = Pipeline(self.settings, log=self._log)
-        self._publishers = {
+        self.pipeline = Pipeline(self.settings, log=self._log_to_ros)
+        self._output_publishers = {
             output.topic: self.create_publisher(get_message(output.type), output.topic, OUTPUT_QOS_DEPTH)
             for output in self.pipeline.outputs()
         }
@@ -68,7 +68,7 @@ class NeforwardNode(Node):
             )
             self.create_subscription(String, ROBOT_DESCRIPTION, self._on_description, latched)
 
-    def _log(self, level: int, message: str) -> None:
+    def _log_to_ros(self, level: int, message: str) -> None:
         logger = self.get_logger()
         if level >= logging.ERROR:
             logger.error(message)
@@ -93,7 +93,7 @@ class NeforwardNode(Node):
             list(message.velocity),
             receive_ns=self._now_ns(),
         )
-        self._publish(results)
+        self._publish_results(results)
 
     def _on_joint_trajectory(self, message: JointTrajectory) -> None:
         points = [
@@ -103,14 +103,14 @@ class NeforwardNode(Node):
             for p in message.points
         ]
         stamp = messages.stamp_ns(message.header.stamp)
-        self._publish(
+        self._publish_results(
             self.pipeline.on_joint_trajectory(stamp, list(message.joint_names), points, receive_ns=self._now_ns())
         )
 
-    def _publish(self, results: list[Result]) -> None:
+    def _publish_results(self, results: list[Result]) -> None:
         for result in results:
             for topic, contents in self.pipeline.messages(result):
-                publisher = self._publishers[topic]
+                publisher = self._output_publishers[topic]
                 publisher.publish(to_message(publisher.msg_type, contents))
 
 
