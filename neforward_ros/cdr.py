@@ -1,0 +1,182 @@
+"""Fast CDR encoding of message contents, generated from the ROS 2 Jazzy definitions.
+
+:func:`encode` turns the message contents built by :mod:`neforward_ros.messages` (nested dicts and
+lists, missing fields meaning their defaults) into the bytes ROS 2 puts on the wire and in bags:
+the 4-byte encapsulation header (CDR, little endian) and the XCDR1 body. For each type, a
+specialised Python encoder is generated once from the rosbags type store's field definitions: it
+inlines nested structs and packs runs of equal primitives with one ``struct.pack``, which makes it
+several times faster than building message objects and serializing them. The tests check its
+bytes against rosbags' own serializer.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable, Mapping
+from functools import cache
+from typing import Any
+
+from neforward_ros.errors import InputError
+from neforward_ros.rostypes import typestore
+
+HEADER = b"\x00\x01\x00\x00"  # CDR_LE encapsulation, options 0
+
+_PRIMITIVES = {  # struct code, size (= CDR alignment), default
+    "bool": ("?", 1, False),
+    "byte": ("B", 1, 0),
+    "char": ("B", 1, 0),
+    "uint8": ("B", 1, 0),
+    "int8": ("b", 1, 0),
+    "uint16": ("H", 2, 0),
+    "int16": ("h", 2, 0),
+    "uint32": ("I", 4, 0),
+    "int32": ("i", 4, 0),
+    "uint64": ("Q", 8, 0),
+    "int64": ("q", 8, 0),
+    "float32": ("f", 4, 0.0),
+    "float64": ("d", 8, 0.0),
+}
+_ZEROS = tuple(b"\0" * n for n in range(8))
+_EMPTY: Mapping[str, Any] = {}
+
+
+def encode(typename: str, contents: Mapping[str, Any]) -> bytes:
+    """CDR bytes (with the encapsulation header) of a message of ``typename`` (``pkg/msg/T``).
+
+    Raises:
+        InputError: an unknown type, or contents that do not fit it (wrong array length, a value
+            of the wrong kind).
+    """
+    encoder = _encoder(typename)
+    buffer = bytearray(HEADER)
+    try:
+        encoder(buffer, contents)
+    except (struct.error, TypeError, AttributeError, UnicodeEncodeError) as exc:
+        raise InputError(f"cannot encode {typename}: {exc}") from exc
+    return bytes(buffer)
+
+
+@cache
+def _encoder(typename: str) -> Callable[[bytearray, Mapping[str, Any]], None]:
+    if typename not in typestore().fielddefs:
+        raise InputError(f"unknown ROS 2 message type {typename!r}")
+    generator = _Generator()
+    generator.struct(typename, "v", 1)
+    source = "def encode(buf, v):\n" + "\n".join(generator.lines) + "\n    return None\n"
+    namespace: dict[str, Any] = {"_ZEROS": _ZEROS, "_EMPTY": _EMPTY, "_check_length": _check_length}
+    namespace.update(generator.constants)
+    exec(compile(source, f"<cdr encoder {typename}>", "exec"), namespace)
+    return namespace["encode"]
+
+
+def _check_length(values: Any, length: int, where: str) -> Any:
+    if len(values) != length:
+        raise InputError(f"{where} needs exactly {length} values, got {len(values)}")
+    return values
+
+
+class _Generator:
+    """Emits the body of an encoder as Python source lines."""
+
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+        self.constants: dict[str, Any] = {}
+        self._names = 0
+
+    def _name(self, stem: str) -> str:
+        self._names += 1
+        return f"{stem}{self._names}"
+
+    def _emit(self, depth: int, line: str) -> None:
+        self.lines.append("    " * depth + line)
+
+    def _align(self, depth: int, size: int) -> None:
+        if size > 1:
+            self._emit(depth, f"pad = (4 - len(buf)) & {size - 1}")
+            self._emit(depth, "if pad: buf += _ZEROS[pad]")
+
+    def _packer(self, code: str) -> str:
+        name = f"_pack_{code}".replace("?", "bool")
+        if name not in self.constants:
+            self.constants[name] = struct.Struct("<" + code).pack
+        return name
+
+    def struct(self, typename: str, var: str, depth: int) -> None:
+        """Code that appends the members of ``typename`` held in the dict named ``var``."""
+        _, fields = typestore().fielddefs[typename]
+        if not fields:
+            self._emit(depth, "buf += b'\\x00'")
+            return
+        index = 0
+        while index < len(fields):
+            name, (nodetype, description) = fields[index]
+            if int(nodetype) == 1 and description[0] in _PRIMITIVES:
+                # a run of members of the same primitive type: one alignment, one pack
+                run = [name]
+                while (
+                    index + len(run) < len(fields)
+                    and int(fields[index + len(run)][1][0]) == 1
+                    and fields[index + len(run)][1][1][0] == description[0]
+                ):
+                    run.append(fields[index + len(run)][0])
+                code, size, default = _PRIMITIVES[description[0]]
+                self._align(depth, size)
+                packer = self._packer(str(len(run)) + code)
+                args = ", ".join(f"{var}.get({member!r}, {default!r})" for member in run)
+                self._emit(depth, f"buf += {packer}({args})")
+                index += len(run)
+                continue
+            self.member(nodetype, description, f"{var}.get({name!r})", f"{typename}.{name}", depth)
+            index += 1
+
+    def member(self, nodetype: Any, description: Any, expression: str, where: str, depth: int) -> None:
+        kind = int(nodetype)  # rosbags Nodetype: BASE 1, NAME 2, ARRAY 3, SEQUENCE 4
+        if kind == 2:
+            sub = self._name("s")
+            self._emit(depth, f"{sub} = {expression}")
+            self._emit(depth, f"if {sub} is None: {sub} = _EMPTY")
+            self.struct(description, sub, depth)
+            return
+        if kind == 1:
+            value = self._name("x")
+            self._emit(depth, f"{value} = {expression}")
+            self.primitive(description[0], value, depth)
+            return
+        (element_type, element_description), length = description
+        items = self._name("items")
+        if kind == 3:
+            self._emit(depth, f"{items} = {expression}")
+            self._emit(depth, f"if {items} is None: {items} = (None,) * {length}")
+            self._emit(depth, f"_check_length({items}, {length}, {where!r})")
+        else:
+            self._emit(depth, f"{items} = {expression} or ()")
+            self._align(depth, 4)
+            self._emit(depth, f"buf += {self._packer('I')}(len({items}))")
+        if int(element_type) == 1 and element_description[0] in _PRIMITIVES:
+            code, size, default = _PRIMITIVES[element_description[0]]
+            self._emit(depth, f"if {items}:")
+            self._align(depth + 1, size)
+            self._emit(
+                depth + 1,
+                f"buf += struct_pack('<%d{code}' % len({items}), *[{default!r} if e is None else e for e in {items}])",
+            )
+            self.constants["struct_pack"] = struct.pack
+            return
+        element = self._name("e")
+        self._emit(depth, f"for {element} in {items}:")
+        self.member(element_type, element_description, element, where, depth + 1)
+
+    def primitive(self, base: str, value: str, depth: int) -> None:
+        if base == "string":
+            encoded = self._name("b")
+            self._emit(depth, f"{encoded} = ({value} or '').encode()")
+            self._align(depth, 4)
+            self._emit(depth, f"buf += {self._packer('I')}(len({encoded}) + 1)")
+            self._emit(depth, f"buf += {encoded}")
+            self._emit(depth, "buf += b'\\x00'")
+            return
+        if base not in _PRIMITIVES:
+            raise InputError(f"cannot encode {base!r} members (wstring is not used by these messages)")
+        code, size, default = _PRIMITIVES[base]
+        self._align(depth, size)
+        self._emit(depth, f"buf += {self._packer('1' + code)}({default!r} if {value} is None else {value})")

@@ -1,0 +1,119 @@
+"""ROS 2 message types as Cyclone DDS types, derived from the rosbags ROS 2 Jazzy definitions.
+
+ROS 2 type ``pkg/msg/T`` is DDS type ``pkg::msg::dds_::T_`` with the same members in the same
+order, serialized as plain CDR (XCDR1), as rmw_cyclonedds does. Nothing is hand-mirrored: each
+struct is built from the rosbags type store's field definitions on first use.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from functools import cache
+from typing import Any
+
+from cyclonedds.idl import IdlStruct, make_idl_struct
+from cyclonedds.idl import types as idl
+
+from neforward_ros.errors import InputError
+from neforward_ros.rostypes import typestore
+
+_BASE = {
+    "bool": bool,
+    "byte": idl.uint8,
+    "char": idl.uint8,
+    "uint8": idl.uint8,
+    "int8": idl.int8,
+    "uint16": idl.uint16,
+    "int16": idl.int16,
+    "uint32": idl.uint32,
+    "int32": idl.int32,
+    "uint64": idl.uint64,
+    "int64": idl.int64,
+    "float32": idl.float32,
+    "float64": idl.float64,
+}
+_DEFAULTS = {"bool": False, "float32": 0.0, "float64": 0.0, "string": ""}
+
+
+def dds_type_name(typename: str) -> str:
+    """``pkg/msg/T`` -> ``pkg::msg::dds_::T_``."""
+    package, kind, name = typename.split("/")
+    return f"{package}::{kind}::dds_::{name}_"
+
+
+def type_hash(typename: str) -> str:
+    """The ROS 2 type hash (``RIHS01_<hex>``) of a message type, as ROS 2 Jazzy computes it."""
+    return typestore().hash_rihs01(typename)
+
+
+@cache
+def dds_type(typename: str) -> type[IdlStruct]:
+    """The Cyclone DDS struct class of a ROS 2 message type."""
+    store = typestore()
+    if typename not in store.fielddefs:
+        raise InputError(f"unknown ROS 2 message type {typename!r}")
+    _, fields = store.fielddefs[typename]
+    members = {name: _member_type(nodetype, description) for name, (nodetype, description) in fields}
+    if not members:  # an empty ROS message has one uint8 placeholder member on the wire
+        members = {"structure_needs_at_least_one_member": idl.uint8}
+    class_name = typename.replace("/", "_")
+    return make_idl_struct(class_name, dds_type_name(typename), members)
+
+
+def _member_type(nodetype: Any, description: Any) -> Any:
+    kind = int(nodetype)  # rosbags Nodetype: BASE 1, NAME 2, ARRAY 3, SEQUENCE 4
+    if kind == 2:
+        return dds_type(description)
+    if kind == 1:
+        base, bound = description
+        if base == "string":
+            return idl.bounded_str[bound] if bound else str
+        return _BASE[base]
+    (element_type, element_description), length = description
+    element = _member_type(element_type, element_description)
+    if kind == 3:
+        return idl.array[element, length]
+    return idl.sequence[element, length] if length else idl.sequence[element]
+
+
+def to_dds(typename: str, contents: Mapping[str, Any] | None = None) -> IdlStruct:
+    """A DDS sample of ``typename`` from message contents (fields left out take their defaults)."""
+    contents = {} if contents is None else contents
+    _, fields = typestore().fielddefs[typename]
+    unknown = set(contents) - {name for name, _ in fields}
+    if unknown:
+        raise InputError(f"{typename} has no field(s) {', '.join(sorted(unknown))}")
+    values = {name: _value(nodetype, description, contents.get(name)) for name, (nodetype, description) in fields}
+    if not fields:
+        values = {"structure_needs_at_least_one_member": 0}
+    return dds_type(typename)(**values)
+
+
+def _value(nodetype: Any, description: Any, value: Any) -> Any:
+    kind = int(nodetype)
+    if kind == 2:
+        return to_dds(description, value)
+    if kind == 1:
+        base = description[0]
+        if value is None:
+            return _DEFAULTS.get(base, 0)
+        if base == "string":
+            return str(value)
+        if base in ("float32", "float64"):
+            return float(value)
+        return bool(value) if base == "bool" else int(value)
+    (element_type, element_description), length = description
+    if value is None:
+        value = [None] * length if kind == 3 else []
+    return [_value(element_type, element_description, item) for item in value]
+
+
+def from_dds(sample: Any) -> Any:
+    """Message contents (dicts, lists, numbers, strings) of a DDS sample."""
+    if isinstance(sample, IdlStruct):
+        return {name: from_dds(getattr(sample, name)) for name in sample.__dataclass_fields__}
+    if isinstance(sample, (list, tuple)):
+        return [from_dds(item) for item in sample]
+    if isinstance(sample, (bytes, bytearray)):
+        return list(sample)
+    return sample
