@@ -1,8 +1,11 @@
 """The ``neforward`` command.
 
-``neforward demo`` loads a robot bundled in ``config/`` (or ``--urdf``), drives every joint along
-a short smooth trajectory and prints each link's omega, alpha, accel and com_accel, computed in one
-batched call of :func:`neforward_ros.forward_recursion`.
+- ``neforward demo``: the node live over loopback DDS, fed by a synthetic 500 Hz joint-state
+  publisher, with a live view and a latency summary (:mod:`neforward_ros.dds.demo`).
+- ``neforward run``: the node over Cyclone DDS without ROS; ``neforward echo``: print a topic.
+- ``neforward table``: each link's omega, alpha, accel and com_accel along a short trajectory of a
+  bundled (or ``--urdf``) robot, computed in one batched call of
+  :func:`neforward_ros.forward_recursion`, with no DDS at all.
 """
 
 from __future__ import annotations
@@ -99,20 +102,63 @@ def run_demo(urdf: str | None, seconds: float, samples: int) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="neforward", description=__doc__.splitlines()[0])
     commands = parser.add_subparsers(dest="command", required=True)
-    demo = commands.add_parser("demo", help="print every link's omega, alpha, accel, com_accel along a trajectory")
+    demo = commands.add_parser(
+        "demo", help="the node live on loopback DDS with a synthetic 500 Hz joint-state publisher and a live view"
+    )
     demo.add_argument("--urdf", help=f"URDF file (default: the bundled {DEFAULT_ROBOT})")
-    demo.add_argument("--seconds", type=float, default=1.0, help="trajectory duration in s (default 1)")
-    demo.add_argument("--samples", type=int, default=5, help="instants to print (default 5)")
+    demo.add_argument("--seconds", type=float, default=10.0, help="how long to publish, s (default 10)")
+    demo.add_argument("--rate", type=float, default=500.0, help="joint-state rate, Hz (default 500)")
+    table = commands.add_parser("table", help="print every link's omega, alpha, accel, com_accel along a trajectory")
+    table.add_argument("--urdf", help=f"URDF file (default: the bundled {DEFAULT_ROBOT})")
+    table.add_argument("--seconds", type=float, default=1.0, help="trajectory duration in s (default 1)")
+    table.add_argument("--samples", type=int, default=5, help="instants to print (default 5)")
+    run = commands.add_parser(
+        "run",
+        help="the neforward node over Cyclone DDS, without ROS (same topics, types, parameters as neforward_node)",
+    )
+    run.add_argument("--urdf", help="URDF file (default: wait for the robot_description topic)")
+    run.add_argument("--params", help="ROS 2 params file (neforward: ros__parameters: ...)")
+    run.add_argument(
+        "--ros-args",
+        dest="ros_args_marker",
+        action="store_true",
+        help="the rest are ROS 2 arguments: -r from:=to (also __ns, __node), -p name:=value, --params-file F",
+    )
+    echo = commands.add_parser("echo", help="print a topic's messages as YAML, like ros2 topic echo")
+    echo.add_argument("topic", help="topic name, e.g. /neforward/link_states")
+    echo.add_argument(
+        "--type", help="message type pkg/msg/Type (default: known for neforward's topics, else discovered)"
+    )
+    echo.add_argument("--count", type=int, help="exit after this many messages")
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ros_args: list[str] = []
+    if "--ros-args" in argv:  # everything after it belongs to ROS, as with ros2 run
+        split = argv.index("--ros-args")
+        argv, ros_args = argv[: split + 1], argv[split + 1 :]
     args = build_parser().parse_args(argv)
     try:
-        if args.command == "demo":
+        if args.command == "table":
             if args.samples < 1 or not (math.isfinite(args.seconds) and args.seconds >= 0):
                 raise NeforwardError("--samples must be at least 1 and --seconds a non-negative number")
             run_demo(args.urdf, args.seconds, args.samples)
+        elif args.command == "demo":
+            if not (math.isfinite(args.seconds) and args.seconds > 0 and math.isfinite(args.rate) and args.rate > 0):
+                raise NeforwardError("--seconds and --rate must be positive numbers")
+            from neforward_ros.dds.demo import live_demo
+
+            return live_demo(args.seconds, args.urdf, args.rate)
+        elif args.command == "run":
+            from neforward_ros.dds.commands import run_node
+
+            return run_node(args.urdf, args.params, ros_args)
+        elif args.command == "echo":
+            from neforward_ros.dds.commands import echo
+
+            return echo(args.topic, args.type, args.count)
     except (NeforwardError, FileNotFoundError) as exc:
         print(f"neforward: error: {exc}", file=sys.stderr)
         return 1

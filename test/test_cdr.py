@@ -88,3 +88,25 @@ def test_bad_contents_are_input_errors() -> None:
         cdr.encode("sensor_msgs/msg/Imu", {"orientation_covariance": [0.0] * 8})
     with pytest.raises(InputError, match="cannot encode"):
         cdr.encode("geometry_msgs/msg/Vector3", {"x": "fast"})
+
+
+@settings(max_examples=60, deadline=None)
+@given(contents=SAMPLES["trajectory_msgs/msg/MultiDOFJointTrajectory"])
+def test_multi_dof_decoder_reads_what_rosbags_reads(contents) -> None:
+    encoded = cdr.encode("trajectory_msgs/msg/MultiDOFJointTrajectory", contents)
+    if not contents["points"]:
+        with pytest.raises(InputError, match="without points"):
+            cdr.decode_multi_dof(encoded)
+        return
+    decoded = cdr.decode_multi_dof(encoded)
+    expected = rostypes.deserialize("trajectory_msgs/msg/MultiDOFJointTrajectory", encoded)
+    stamp = expected["header"]["stamp"]
+    assert decoded.stamp_ns == stamp["sec"] * 10**9 + stamp["nanosec"]
+    assert decoded.frame_id == expected["header"]["frame_id"]
+    assert list(decoded.joint_names) == expected["joint_names"]
+    point = expected["points"][0]
+    transforms = [[*t["translation"].values(), *t["rotation"].values()] for t in point["transforms"]]
+    assert decoded.transforms.tolist() == transforms
+    velocities = [[*v["linear"].values(), *v["angular"].values()] for v in point["velocities"]]
+    assert decoded.velocities.tolist() == velocities
+    assert decoded.accelerations.shape == (len(point["accelerations"]), 6)

@@ -117,3 +117,45 @@ def from_dds(sample: Any) -> Any:
     if isinstance(sample, (bytes, bytearray)):
         return list(sample)
     return sample
+
+
+def raw_sample(typename: str, payload: bytes) -> Any:
+    """A sample of the DDS type of ``typename`` that writes the given CDR bytes as they are.
+
+    cyclonedds' DataWriter.write calls ``sample.serialize()``; this sample answers with bytes
+    already encoded by :mod:`neforward_ros.cdr` (the same layout, several times faster).
+    """
+    sample = object.__new__(dds_type(typename))
+    sample.serialize = lambda use_version_2=None, endianness=None: payload
+    return sample
+
+
+class RawBytes(bytes):
+    """A sample taken as its CDR bytes (with the encapsulation header); ``sample_info`` is set on it."""
+
+
+class _RawDecoder:
+    """Stands in for a DDS type on the Python side of a reader: hands samples over undecoded."""
+
+    @staticmethod
+    def deserialize(data: bytes) -> RawBytes:
+        return RawBytes(data)
+
+    @staticmethod
+    def deserialize_key(data: bytes) -> RawBytes:
+        return RawBytes(data)
+
+
+def raw_reader(participant: Any, topic_name: str, typename: str, qos: Any) -> Any:
+    """A DataReader of ``typename`` on DDS topic ``topic_name`` whose take() returns CDR bytes.
+
+    The DDS type (name, key, type information) is the real one; only the Python-side decoding is
+    skipped, so the caller can decode with a faster decoder or only the part it needs.
+    """
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+
+    topic = Topic(participant, topic_name, dds_type(typename))
+    reader = DataReader(participant, topic, qos=qos)
+    topic.data_type = _RawDecoder
+    return reader

@@ -1,0 +1,136 @@
+"""``neforward run`` and ``neforward echo``: the node and a topic printer over Cyclone DDS."""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from neforward_ros import messages
+from neforward_ros.dds.names import NodeNames
+from neforward_ros.dds.qos import default_qos, latched_qos
+from neforward_ros.dds.ros_args import parse_ros_args
+from neforward_ros.dds.types import raw_reader
+from neforward_ros.errors import InputError
+from neforward_ros.parameters import NODE_NAME, load_params_file, node_settings
+from neforward_ros.rostypes import deserialize
+
+_LEVELS = {"DEBUG": logging.DEBUG, "INFO": logging.INFO, "WARN": logging.WARNING, "WARNING": logging.WARNING}
+_LEVELS.update({"ERROR": logging.ERROR, "FATAL": logging.CRITICAL})
+
+
+def domain_id() -> int:
+    """ROS_DOMAIN_ID, 0 when unset, as ROS 2 does."""
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if not text:
+        return 0
+    if not text.isdigit() or int(text) > 232:
+        raise InputError(f"ROS_DOMAIN_ID must be an integer from 0 to 232, got {text!r}")
+    return int(text)
+
+
+def run_node(urdf: str | None, params_file: str | None, ros_args: Sequence[str]) -> int:
+    """``neforward run``: the node until Ctrl-C or SIGTERM. Start-up errors raise NeforwardError."""
+    from neforward_ros.dds.runtime import DdsNode  # imports cyclonedds
+
+    parsed = parse_ros_args(ros_args, NODE_NAME)
+    node_name = parsed.node_name or NODE_NAME
+    values: dict[str, Any] = {}
+    for path in [*([params_file] if params_file else []), *parsed.params_files]:
+        values.update(load_params_file(path, node_name))
+    values.update(parsed.params)
+    if urdf is not None:
+        try:
+            values["robot_description"] = Path(urdf).read_text()
+        except OSError as exc:
+            raise InputError(f"cannot read --urdf {urdf}: {exc.strerror or exc}") from exc
+    use_sim_time = values.pop("use_sim_time", False)
+    if not isinstance(use_sim_time, bool):
+        raise InputError(f"parameter use_sim_time must be bool, got {use_sim_time!r}")
+    settings = node_settings(values)
+    names = NodeNames(node_name, parsed.namespace or "/", parsed.remaps)
+    logging.basicConfig(
+        level=_LEVELS.get(parsed.log_level or "INFO", logging.INFO),
+        format=f"[%(levelname)s] [%(created).6f] [{node_name}]: %(message)s",
+        stream=sys.stderr,
+    )
+    log = logging.getLogger("neforward_ros").log
+    domain = domain_id()
+    node = DdsNode(settings, names, domain_id=domain, use_sim_time=use_sim_time, log=log)
+    outputs = ", ".join(names.resolve(o.topic) for o in node.pipeline.outputs())
+    log(logging.INFO, f"node {names.fully_qualified_name} on DDS domain {domain}; publishing {outputs}")
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        node.spin(stop)
+    except KeyboardInterrupt:
+        pass
+    log(logging.INFO, f"stopped: {node.messages_in} messages in, {node.messages_out} results out")
+    return 0
+
+
+KNOWN_TYPES = {
+    "link_states": messages.LINK_STATES_TYPE,
+    "com_states": messages.LINK_STATES_TYPE,
+    "accel": messages.ACCEL_TYPE,
+    "twist": messages.TWIST_TYPE,
+    "imu": messages.IMU_TYPE,
+    "markers": messages.MARKERS_TYPE,
+    "joint_states": messages.JOINT_STATE_TYPE,
+    "joint_states_accel": messages.JOINT_TRAJECTORY_TYPE,
+    "robot_description": messages.STRING_TYPE,
+}
+
+
+def topic_type(topic: str, participant: Any, wait_s: float = 5.0) -> str:
+    """The ROS 2 type of a topic: from its last name token for neforward's topics, else from discovery."""
+    known = KNOWN_TYPES.get(topic.rstrip("/").rsplit("/", 1)[-1])
+    if known:
+        return known
+    from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
+
+    reader = BuiltinDataReader(participant, BuiltinTopicDcpsPublication)
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline:
+        for endpoint in reader.take(N=100):
+            if getattr(endpoint, "topic_name", None) == "rt" + topic:
+                package, kind, _, name = endpoint.type_name.split("::")
+                return f"{package}/{kind}/{name.rstrip('_')}"
+        time.sleep(0.1)
+    raise InputError(f"no publisher of {topic} found in {wait_s:g} s; give its type with --type pkg/msg/Type")
+
+
+def echo(topic: str, typename: str | None, count: int | None) -> int:
+    """``neforward echo``: print messages of a topic as YAML, like ``ros2 topic echo``."""
+    from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.util import duration
+
+    name = NodeNames().resolve(topic)
+    participant = DomainParticipant(domain_id())
+    typename = typename or topic_type(name, participant)
+    qos = latched_qos(typename) if name.endswith("/robot_description") else default_qos(typename)
+    reader = raw_reader(participant, "rt" + name, typename, qos)
+    waitset = WaitSet(participant)
+    waitset.attach(ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+    printed = 0
+    try:
+        while count is None or printed < count:
+            waitset.wait(duration(seconds=0.2))
+            for data in reader.take(N=64):
+                sys.stdout.write(yaml.safe_dump(deserialize(typename, bytes(data)), sort_keys=False) + "---\n")
+                printed += 1
+                if count is not None and printed >= count:
+                    break
+            sys.stdout.flush()
+    except KeyboardInterrupt:
+        pass
+    return 0

@@ -1,0 +1,32 @@
+"""QoS profiles matching ROS 2's, with the type hash in USER_DATA as rmw_cyclonedds puts it."""
+
+from __future__ import annotations
+
+from cyclonedds.qos import Policy, Qos
+
+from neforward_ros.dds.types import type_hash
+
+_MAX_BLOCKING_NS = 100_000_000  # rmw_qos_profile_default leaves it to the RMW; Cyclone's default
+
+
+def _common(typename: str) -> list:
+    return [
+        Policy.Reliability.Reliable(max_blocking_time=_MAX_BLOCKING_NS),
+        Policy.DataRepresentation(use_cdrv0_representation=True),  # plain CDR (XCDR1), as ROS 2 sends
+        Policy.Userdata(f"typehash={type_hash(typename)};".encode()),
+    ]
+
+
+def default_qos(typename: str, depth: int = 10) -> Qos:
+    """ROS 2's default: reliable, volatile, keep last ``depth`` (10)."""
+    return Qos(Policy.Durability.Volatile, Policy.History.KeepLast(depth), *_common(typename))
+
+
+def latched_qos(typename: str, depth: int = 1) -> Qos:
+    """Transient local, reliable, keep last ``depth``: robot_description, ros_discovery_info."""
+    return Qos(Policy.Durability.TransientLocal, Policy.History.KeepLast(depth), *_common(typename))
+
+
+def participant_qos() -> Qos:
+    """USER_DATA ``enclave=/;`` as ROS 2 participants carry it (the default security enclave)."""
+    return Qos(Policy.Userdata(b"enclave=/;"))
