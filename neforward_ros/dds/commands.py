@@ -18,7 +18,7 @@ from neforward_ros import messages
 from neforward_ros.dds.names import NodeNames
 from neforward_ros.dds.qos import default_qos, latched_qos
 from neforward_ros.dds.ros_args import parse_ros_args
-from neforward_ros.dds.types import raw_reader
+from neforward_ros.dds.types import RawBytes, raw_reader
 from neforward_ros.errors import InputError
 from neforward_ros.parameters import NODE_NAME, load_params_file, node_settings
 from neforward_ros.rostypes import deserialize
@@ -126,6 +126,8 @@ def echo(topic: str, typename: str | None, count: int | None) -> int:
         while count is None or printed < count:
             waitset.wait(duration(seconds=0.2))
             for data in reader.take(N=64):
+                if not isinstance(data, RawBytes):
+                    continue  # a publisher went away: no data
                 sys.stdout.write(yaml.safe_dump(deserialize(typename, bytes(data)), sort_keys=False) + "---\n")
                 printed += 1
                 if count is not None and printed >= count:

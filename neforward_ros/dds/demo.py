@@ -86,7 +86,7 @@ def live_demo(seconds: float, urdf: str | None, rate: float = 500.0) -> int:
     from neforward_ros.cli import DEFAULT_ROBOT, bundled_config_path
     from neforward_ros.dds.loopback import use_loopback
     from neforward_ros.dds.qos import default_qos
-    from neforward_ros.dds.types import dds_type, raw_reader
+    from neforward_ros.dds.types import RawBytes, dds_type, raw_reader
 
     path = Path(urdf) if urdf else bundled_config_path(DEFAULT_ROBOT)
     model = load_model(path)
@@ -120,7 +120,8 @@ def live_demo(seconds: float, urdf: str | None, rate: float = 500.0) -> int:
             now = time.time_ns()
             for name, reader in readers.items():
                 for data in reader.take(N=256):
-                    view.add(name, cdr.decode_multi_dof(bytes(data)), now)
+                    if isinstance(data, RawBytes):
+                        view.add(name, cdr.decode_multi_dof(bytes(data)), now)
             view.refresh()
             if end is None and not publisher.is_alive():
                 end = time.monotonic() + 1.0  # stragglers

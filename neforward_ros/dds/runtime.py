@@ -17,7 +17,7 @@ from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.qos import Policy, Qos
-from cyclonedds.sub import DataReader
+from cyclonedds.sub import DataReader, InvalidSample
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
@@ -116,6 +116,8 @@ class DdsNode:
             while True:
                 samples = reader.take(N=_BATCH)
                 for sample in samples:
+                    if isinstance(sample, InvalidSample):  # a writer went away: state, not data
+                        continue
                     try:
                         handler(sample)
                     except Exception as exc:

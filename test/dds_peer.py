@@ -1,0 +1,132 @@
+"""Test helpers for end-to-end runs over real Cyclone DDS on loopback: the node as a separate
+process (``neforward run``), and a test participant that publishes and receives ROS 2 messages."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from neforward_ros import cdr, messages
+from neforward_ros.dds.qos import default_qos, latched_qos
+from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
+
+STARTUP_TIMEOUT = 30.0
+
+
+class NodeProcess:
+    """``neforward run`` in its own process; output goes to a log file the test can read."""
+
+    def __init__(self, arguments: list[str], log_path: Path, environment: dict[str, str]) -> None:
+        self.log_path = log_path
+        self._log = open(log_path, "w")
+        command = [sys.executable, "-m", "neforward_ros.cli", "run", *arguments]
+        self.process = subprocess.Popen(command, stdout=self._log, stderr=subprocess.STDOUT, env=environment)
+
+    def log(self) -> str:
+        return self.log_path.read_text()
+
+    def alive(self) -> bool:
+        return self.process.poll() is None
+
+    def stop(self, signal_number: int = 2, timeout: float = 10.0) -> int:
+        if self.process.poll() is None:
+            self.process.send_signal(signal_number)
+            try:
+                self.process.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait()
+        self._log.close()
+        return self.process.returncode
+
+
+class Peer:
+    """The test's own participant: writers and raw readers by ROS 2 topic name."""
+
+    def __init__(self, domain_id: int) -> None:
+        self.participant = DomainParticipant(domain_id)
+        self.waitset = WaitSet(self.participant)
+        self.writers: dict[str, tuple[str, DataWriter]] = {}
+        self.readers: dict[str, tuple[str, object]] = {}
+
+    def writer(self, topic: str, typename: str, latched: bool = False) -> DataWriter:
+        qos = latched_qos(typename) if latched else default_qos(typename, depth=1000)
+        writer = DataWriter(self.participant, Topic(self.participant, "rt" + topic, dds_type(typename)), qos=qos)
+        self.writers[topic] = (typename, writer)
+        return writer
+
+    def reader(self, topic: str, typename: str) -> None:
+        qos = Qos(
+            Policy.Reliability.Reliable(max_blocking_time=100_000_000),
+            Policy.History.KeepLast(100_000),
+            Policy.Durability.Volatile,
+            Policy.DataRepresentation(use_cdrv0_representation=True),
+        )
+        reader = raw_reader(self.participant, "rt" + topic, typename, qos)
+        self.readers[topic] = (typename, reader)
+        self.waitset.attach(ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+
+    def write(self, topic: str, contents: dict) -> None:
+        typename, writer = self.writers[topic]
+        writer.write(raw_sample(typename, cdr.encode(typename, contents)))
+
+    def take(self, topic: str) -> list[bytes]:
+        _, reader = self.readers[topic]
+        out = []
+        while True:
+            batch = reader.take(N=1000)
+            out += [bytes(b) for b in batch if isinstance(b, RawBytes)]  # not the writer-gone notices
+            if len(batch) < 1000:
+                return out
+
+    def wait(self, seconds: float) -> None:
+        self.waitset.wait(duration(seconds=seconds))
+
+    def wait_connected(self, node: NodeProcess, timeout: float = STARTUP_TIMEOUT) -> None:
+        """Until every writer and reader of this peer has matched the node's endpoints."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            assert node.alive(), f"node exited early:\n{node.log()}"
+            writers_ok = all(w.get_publication_matched_status().current_count for _, w in self.writers.values())
+            readers_ok = all(r.get_subscription_matched_status().current_count for _, r in self.readers.values())
+            if writers_ok and readers_ok:
+                time.sleep(0.3)  # the node's side of the match
+                return
+            time.sleep(0.05)
+        raise AssertionError(f"node did not connect in {timeout} s:\n{node.log()}")
+
+    def wait_disconnected(self, timeout: float = 15.0) -> None:
+        """Until no endpoint of this peer is matched any more (the node process has gone)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            counts = [w.get_publication_matched_status().current_count for _, w in self.writers.values()]
+            counts += [r.get_subscription_matched_status().current_count for _, r in self.readers.values()]
+            if not any(counts):
+                return
+            time.sleep(0.05)
+        raise AssertionError(f"still matched after {timeout} s")
+
+
+def joint_state(stamp_ns: int, names, positions, velocities=()) -> dict:
+    return {
+        "header": {"stamp": messages.time(stamp_ns)},
+        "name": list(names),
+        "position": list(positions),
+        "velocity": list(velocities),
+    }
+
+
+def loopback_env(domain_id: int, config_uri: str) -> dict[str, str]:
+    environment = dict(os.environ)
+    environment.update({"CYCLONEDDS_URI": config_uri, "ROS_DOMAIN_ID": str(domain_id)})
+    return environment

@@ -1,0 +1,341 @@
+"""End to end over real Cyclone DDS on loopback: ``neforward run`` as a separate process, a test
+participant publishing ROS 2 messages to it and checking what comes back against forward_recursion.
+
+Every test bounds its own time and stops the processes it started. The DDS configuration binds
+127.0.0.1 with multicast off, and each test has its own domain id.
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from neforward_ros import cdr, forward_recursion, load_model, messages, rostypes
+from neforward_ros.dds.graph import DISCOVERY_TOPIC, DISCOVERY_TYPE
+from neforward_ros.dds.loopback import write_config
+from neforward_ros.dds.types import type_hash
+
+from conftest import CONFIG_DIR
+from dds_peer import NodeProcess, Peer, joint_state, loopback_env
+
+PANDA = CONFIG_DIR / "panda.urdf"
+MODEL = load_model(PANDA)
+NAMES = list(MODEL.joint_names)
+EPOCH = 1_700_000_000 * 10**9
+STARTUP = 30.0
+_DOMAINS = itertools.count(random.randint(100, 150))
+
+
+@pytest.fixture(scope="module")
+def config_uri(tmp_path_factory) -> str:
+    uri = write_config(tmp_path_factory.mktemp("dds")).as_uri()
+    os.environ["CYCLONEDDS_URI"] = uri  # this process's participants: loopback too
+    return uri
+
+
+@pytest.fixture
+def domain(config_uri) -> int:
+    return next(_DOMAINS)
+
+
+@pytest.fixture
+def start(config_uri, domain, tmp_path):
+    nodes: list[NodeProcess] = []
+
+    def start_node(*arguments: str) -> NodeProcess:
+        node = NodeProcess(list(arguments), tmp_path / f"node{len(nodes)}.log", loopback_env(domain, config_uri))
+        nodes.append(node)
+        return node
+
+    yield start_node
+    for node in nodes:
+        node.stop()
+
+
+def stream(peer: Peer, states, rate: float, topics=()) -> dict[str, list[bytes]]:
+    """Write joint states at ``rate`` Hz, collecting what arrives on ``topics`` meanwhile."""
+    received: dict[str, list[bytes]] = {topic: [] for topic in topics}
+    start = time.monotonic()
+    for k, contents in enumerate(states):
+        delay = start + k / rate - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        peer.write("/joint_states", contents)
+        for topic in topics:
+            received[topic] += peer.take(topic)
+    return received
+
+
+def collect(peer: Peer, received: dict[str, list[bytes]], until, timeout: float = 5.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and not until(received):
+        peer.wait(0.05)
+        for topic in received:
+            received[topic] += peer.take(topic)
+
+
+def still_states(q: np.ndarray, count: int, start_ns: int = EPOCH, step_ns: int = 10_000_000) -> list[dict]:
+    return [joint_state(start_ns + k * step_ns, NAMES, q.tolist()) for k in range(count)]
+
+
+def check_still_outputs(link_states: bytes, accel: bytes | None, imu: bytes | None, q: np.ndarray) -> None:
+    expected = forward_recursion(MODEL, q, np.zeros_like(q), np.zeros_like(q))
+    root = expected.in_root()
+    point = cdr.decode_multi_dof(link_states)
+    assert point.frame_id == MODEL.root_link and point.joint_names == MODEL.link_names
+    np.testing.assert_allclose(point.transforms[:, :3], root.position, atol=1e-9)
+    np.testing.assert_allclose(point.accelerations[:, :3], root.accel, atol=1e-6)
+    np.testing.assert_allclose(point.accelerations[:, 3:], 0.0, atol=1e-6)
+    hand = MODEL.link_index["panda_hand"]
+    if accel is not None:
+        message = rostypes.deserialize(messages.ACCEL_TYPE, accel)
+        assert message["header"]["frame_id"] == "panda_hand"
+        linear = [message["accel"]["linear"][k] for k in "xyz"]
+        np.testing.assert_allclose(linear, expected.accel[hand], atol=1e-6)
+    if imu is not None:
+        message = rostypes.deserialize(messages.IMU_TYPE, imu)
+        linear = [message["linear_acceleration"][k] for k in "xyz"]
+        np.testing.assert_allclose(linear, expected.accel[hand], atol=1e-6)  # specific force: +g at rest
+
+
+PER_LINK = ("-p", "accel_links:=[panda_hand]", "-p", "imu_links:=[panda_hand]", "-p", "estimator.mode:=causal")
+OUTPUTS = ("/neforward/link_states", "/neforward/panda_hand/accel", "/neforward/panda_hand/imu")
+
+
+def peer_for_outputs(domain: int) -> Peer:
+    peer = Peer(domain)
+    peer.writer("/joint_states", messages.JOINT_STATE_TYPE)
+    peer.reader("/neforward/link_states", messages.LINK_STATES_TYPE)
+    peer.reader("/neforward/panda_hand/accel", messages.ACCEL_TYPE)
+    peer.reader("/neforward/panda_hand/imu", messages.IMU_TYPE)
+    return peer
+
+
+def test_link_states_accel_and_imu_match_forward_recursion(start, domain) -> None:
+    node = start("--urdf", str(PANDA), "--ros-args", *PER_LINK)
+    peer = peer_for_outputs(domain)
+    peer.wait_connected(node)
+    q = np.linspace(-0.6, 0.6, len(NAMES))
+    received = stream(peer, still_states(q, 20), rate=100.0, topics=OUTPUTS)
+    collect(peer, received, lambda r: all(len(v) >= 18 for v in r.values()))
+    assert len(received[OUTPUTS[0]]) == 18  # 20 in; the first 2 are too few samples for an estimate
+    for topic in OUTPUTS:
+        assert len(received[topic]) == 18, topic
+    check_still_outputs(received[OUTPUTS[0]][-1], received[OUTPUTS[1]][-1], received[OUTPUTS[2]][-1], q)
+    stamps = [cdr.decode_multi_dof(b).stamp_ns for b in received[OUTPUTS[0]]]
+    assert stamps == [EPOCH + k * 10_000_000 for k in range(2, 20)]  # each output has its input's stamp
+
+
+def test_supplied_states_give_exact_kinematics_over_the_wire(start, domain) -> None:
+    node = start("--urdf", str(PANDA), "--ros-args", "-p", "acceleration_source:=supplied")
+    peer = Peer(domain)
+    peer.writer("/joint_states_accel", messages.JOINT_TRAJECTORY_TYPE)
+    peer.reader("/neforward/link_states", messages.LINK_STATES_TYPE)
+    peer.reader("/neforward/com_states", messages.LINK_STATES_TYPE)
+    peer.wait_connected(node)
+    rng = np.random.default_rng(11)
+    q, qd, qdd = (rng.uniform(-2, 2, len(NAMES)) for _ in range(3))
+    point = {"positions": q.tolist(), "velocities": qd.tolist(), "accelerations": qdd.tolist()}
+    peer.write(
+        "/joint_states_accel", {"header": {"stamp": messages.time(EPOCH)}, "joint_names": NAMES, "points": [point]}
+    )
+    received = {"/neforward/link_states": [], "/neforward/com_states": []}
+    collect(peer, received, lambda r: all(r.values()))
+    expected = forward_recursion(MODEL, q, qd, qdd).in_root()
+    links = cdr.decode_multi_dof(received["/neforward/link_states"][0])
+    coms = cdr.decode_multi_dof(received["/neforward/com_states"][0])
+    assert links.stamp_ns == EPOCH
+    np.testing.assert_allclose(links.velocities[:, 3:], expected.omega, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(links.velocities[:, :3], expected.velocity, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(links.accelerations[:, :3], expected.accel, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(links.accelerations[:, 3:], expected.alpha, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(coms.accelerations[:, :3], expected.com_accel, rtol=0, atol=1e-9)
+
+
+def test_model_from_the_transient_local_topic_after_the_node_started(start, domain) -> None:
+    node = start("--ros-args", *PER_LINK)
+    peer = peer_for_outputs(domain)
+    peer.wait_connected(node)
+    time.sleep(0.5)
+    q = np.full(len(NAMES), 0.2)
+    early = stream(peer, still_states(q, 5), rate=100.0, topics=OUTPUTS)  # before the model: dropped
+    assert not any(early.values())
+    description = peer.writer("/robot_description", messages.STRING_TYPE, latched=True)
+    peer.write("/robot_description", {"data": PANDA.read_text()})
+    deadline = time.monotonic() + 10
+    while "model 'panda'" not in node.log() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert description.get_publication_matched_status().current_count == 1
+    received = stream(peer, still_states(q, 10, start_ns=EPOCH + 10**9), rate=100.0, topics=OUTPUTS)
+    collect(peer, received, lambda r: all(len(v) >= 8 for v in r.values()))
+    check_still_outputs(received[OUTPUTS[0]][-1], received[OUTPUTS[1]][-1], received[OUTPUTS[2]][-1], q)
+    log = node.log()
+    assert log.count("waiting for the model on the robot_description topic") == 1
+    assert "joint states dropped: no robot model yet" in log
+
+
+def test_node_restart_mid_stream(start, domain) -> None:
+    peer = peer_for_outputs(domain)
+    first = start("--urdf", str(PANDA), "--ros-args", *PER_LINK)
+    peer.wait_connected(first)
+    q = np.full(len(NAMES), -0.3)
+    before = stream(peer, still_states(q, 10), rate=100.0, topics=OUTPUTS)
+    collect(peer, before, lambda r: all(len(v) >= 8 for v in r.values()))
+    assert first.stop() == 0
+    peer.wait_disconnected()
+    second = start("--urdf", str(PANDA), "--ros-args", *PER_LINK)
+    peer.wait_connected(second)
+    after = stream(peer, still_states(q, 10, start_ns=EPOCH + 10**9), rate=100.0, topics=OUTPUTS)
+    collect(peer, after, lambda r: all(len(v) >= 8 for v in r.values()))
+    assert len(after[OUTPUTS[0]]) == 8
+    check_still_outputs(after[OUTPUTS[0]][-1], after[OUTPUTS[1]][-1], after[OUTPUTS[2]][-1], q)
+
+
+def test_bad_input_over_the_wire_then_good_input_is_still_right(start, domain) -> None:
+    node = start("--urdf", str(PANDA), "--ros-args", *PER_LINK)
+    peer = peer_for_outputs(domain)
+    peer.wait_connected(node)
+    q = np.full(len(NAMES), 0.4)
+    t = EPOCH + 5 * 10**9
+    bad = [
+        joint_state(t, NAMES, [0.1, 0.2]),  # names and positions of different lengths
+        joint_state(t + 10**7, NAMES, [float("nan")] * len(NAMES)),  # NaN
+        joint_state(t + 2 * 10**7, ["ghost", *NAMES], [9.0, *q.tolist()]),  # an unknown joint (and a good sample)
+        joint_state(t - 10**9, NAMES, q.tolist()),  # stamps going backwards
+    ]
+    stream(peer, bad, rate=100.0)
+    good = still_states(q, 10, start_ns=t + 10**9)
+    received = stream(peer, good, rate=100.0, topics=OUTPUTS)
+    collect(peer, received, lambda r: all(len(v) >= 8 for v in r.values()))
+    assert node.alive()
+    check_still_outputs(received[OUTPUTS[0]][-1], received[OUTPUTS[1]][-1], received[OUTPUTS[2]][-1], q)
+    log = node.log()
+    for text in ("names but 2 positions", "non-finite position", "unknown joint 'ghost'", "went back in time"):
+        assert text in log, text
+    assert "Traceback" not in log
+
+
+def test_200_hz_for_5_s_loses_no_output(start, domain) -> None:
+    node = start("--urdf", str(PANDA), "--ros-args", "-p", "estimator.mode:=causal")
+    peer = Peer(domain)
+    peer.writer("/joint_states", messages.JOINT_STATE_TYPE)
+    peer.reader("/neforward/link_states", messages.LINK_STATES_TYPE)
+    peer.wait_connected(node)
+    times = np.arange(1000) / 200.0
+    q = 0.5 * np.sin(np.outer(times, np.linspace(1.0, 3.0, len(NAMES))))
+    states = [joint_state(EPOCH + round(t * 1e9), NAMES, row.tolist()) for t, row in zip(times, q, strict=True)]
+    received = stream(peer, states, rate=200.0, topics=["/neforward/link_states"])
+    collect(peer, received, lambda r: len(r["/neforward/link_states"]) >= 998, timeout=10.0)
+    stamps = [cdr.decode_multi_dof(b).stamp_ns for b in received["/neforward/link_states"]]
+    assert stamps == [s["header"]["stamp"]["sec"] * 10**9 + s["header"]["stamp"]["nanosec"] for s in states[2:]]
+
+
+def test_names_and_types_on_the_wire_are_ros2s(start, domain) -> None:
+    from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication, BuiltinTopicDcpsSubscription
+    from cyclonedds.qos import Policy
+
+    from neforward_ros.dds.qos import latched_qos
+    from neforward_ros.dds.types import raw_reader
+
+    node = start(
+        "--urdf", str(PANDA), "--ros-args", "-r", "__ns:=/robot1", "-r", "joint_states:=/arm/joint_states",
+        "-p", "imu_links:=[panda_hand]",
+    )  # fmt: skip
+    peer = Peer(domain)
+    peer.writer("/arm/joint_states", messages.JOINT_STATE_TYPE)
+    peer.reader("/robot1/neforward/link_states", messages.LINK_STATES_TYPE)
+    peer.wait_connected(node)
+    publications, subscriptions = {}, {}
+    for kind, store in ((BuiltinTopicDcpsPublication, publications), (BuiltinTopicDcpsSubscription, subscriptions)):
+        reader = BuiltinDataReader(peer.participant, kind)
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and len(store) < 3:
+            for endpoint in reader.take(N=200):
+                if endpoint.participant_key != peer.participant.guid:
+                    store[endpoint.topic_name] = endpoint
+            time.sleep(0.05)
+    expected_writers = {
+        "rt/robot1/neforward/link_states": messages.LINK_STATES_TYPE,
+        "rt/robot1/neforward/com_states": messages.LINK_STATES_TYPE,
+        "rt/robot1/neforward/panda_hand/imu": messages.IMU_TYPE,
+        DISCOVERY_TOPIC: DISCOVERY_TYPE,
+    }
+    for topic, typename in expected_writers.items():
+        endpoint = publications[topic]
+        package, kind, name = typename.split("/")
+        assert endpoint.type_name == f"{package}::{kind}::dds_::{name}_"
+        assert endpoint.qos[Policy.Userdata].data == f"typehash={type_hash(typename)};".encode()
+    assert type_hash(messages.LINK_STATES_TYPE).startswith("RIHS01_")
+    joint_states = subscriptions["rt/arm/joint_states"]  # remapped from the relative joint_states
+    assert joint_states.type_name == "sensor_msgs::msg::dds_::JointState_"
+
+    # The ROS 2 graph: ros_discovery_info names the node and lists its endpoints' GIDs (GUIDs).
+    info_reader = raw_reader(peer.participant, DISCOVERY_TOPIC, DISCOVERY_TYPE, latched_qos(DISCOVERY_TYPE))
+    deadline = time.monotonic() + 5
+    infos = []
+    while time.monotonic() < deadline and not infos:
+        infos = [rostypes.deserialize(DISCOVERY_TYPE, bytes(b)) for b in info_reader.take(N=10)]
+        time.sleep(0.05)
+    assert infos, "no ros_discovery_info sample"
+    (node_info,) = infos[-1]["node_entities_info_seq"]
+    assert (node_info["node_namespace"], node_info["node_name"]) == ("/robot1", "neforward")
+    writer_gids = {bytes(g["data"]) for g in node_info["writer_gid_seq"]}
+    assert publications["rt/robot1/neforward/link_states"].key.bytes in writer_gids
+    reader_gids = {bytes(g["data"]) for g in node_info["reader_gid_seq"]}
+    assert joint_states.key.bytes in reader_gids
+    assert bytes(infos[-1]["gid"]["data"]) == joint_states.participant_key.bytes
+
+
+def test_ctrl_c_exits_cleanly_and_startup_errors_are_one_line(start, config_uri, domain, tmp_path) -> None:
+    node = start("--urdf", str(PANDA))
+    deadline = time.monotonic() + STARTUP
+    while "publishing" not in node.log() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert node.stop(signal.SIGINT) == 0
+    assert "Traceback" not in node.log() and "stopped:" in node.log()
+    environment = {**os.environ, "CYCLONEDDS_URI": config_uri, "ROS_DOMAIN_ID": str(domain)}
+    for arguments, text in (
+        (["--urdf", "/no/such.urdf"], "cannot read --urdf"),
+        (["--urdf", str(tmp_path / "bad.urdf")], "malformed URDF XML"),
+        (["--urdf", str(PANDA), "--ros-args", "-p", "estimator.mode:=instant"], "estimator.mode must be one of"),
+        (["--urdf", str(PANDA), "--ros-args", "--enclave", "x"], "not supported"),
+    ):
+        (tmp_path / "bad.urdf").write_text("<robot name='x'><link name='a'>")
+        result = subprocess.run(
+            [sys.executable, "-m", "neforward_ros.cli", "run", *arguments],
+            capture_output=True, text=True, timeout=60, env=environment,
+        )  # fmt: skip
+        assert result.returncode == 1, result.stderr
+        assert text in result.stderr and result.stderr.count("\n") == 1, result.stderr
+
+
+def test_echo_prints_yaml_like_ros2_topic_echo(start, config_uri, domain) -> None:
+    node = start("--urdf", str(PANDA), "--ros-args", *PER_LINK)
+    peer = Peer(domain)
+    peer.writer("/joint_states", messages.JOINT_STATE_TYPE)
+    peer.wait_connected(node)
+    environment = {**os.environ, "CYCLONEDDS_URI": config_uri, "ROS_DOMAIN_ID": str(domain)}
+    echo = subprocess.Popen(
+        [sys.executable, "-m", "neforward_ros.cli", "echo", "/neforward/panda_hand/accel", "--count", "2"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=environment,
+    )  # fmt: skip
+    try:
+        time.sleep(3.0)  # the echo process discovers the node
+        q = np.zeros(len(NAMES))
+        stream(peer, still_states(q, 300, start_ns=EPOCH), rate=100.0)
+        out, err = echo.communicate(timeout=20)
+    finally:
+        echo.kill()
+    assert echo.returncode == 0, err
+    documents = [d for d in out.split("---\n") if d.strip()]
+    assert len(documents) == 2
+    assert documents[0].startswith("header:\n  stamp:\n    sec: ")
+    assert "frame_id: panda_hand" in documents[0] and "accel:\n  linear:\n    x: " in documents[0]
