@@ -54,6 +54,8 @@ class Result:
         in_root: the same vectors along the root frame's axes.
         com_position_in_root: each link's centre of mass in the root frame, m, (n_links, 3).
         com_velocity_in_root: velocity of each centre of mass along the root axes, m/s.
+        orientation_in_root: each link frame's orientation in the root frame, unit quaternions
+            (x, y, z, w), (n_links, 4).
         joints: the joint state it was computed from.
     """
 
@@ -64,6 +66,7 @@ class Result:
     in_root: LinkKinematics
     com_position_in_root: np.ndarray
     com_velocity_in_root: np.ndarray
+    orientation_in_root: np.ndarray
     joints: JointEstimate
 
 
@@ -314,5 +317,6 @@ class Pipeline:
             in_root=in_root,
             com_position_in_root=in_link.position + np.einsum("kij,kj->ki", rotation, c),
             com_velocity_in_root=np.einsum("kij,kj->ki", rotation, com_velocity_in_link),
+            orientation_in_root=messages.quaternions(rotation),
             joints=estimate,
         )

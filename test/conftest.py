@@ -18,6 +18,7 @@ TEST_ROBOTS = {
     "prismatic": URDF_DIR / "prismatic.urdf",
     "mimic": URDF_DIR / "mimic.urdf",
     "fixed_between": URDF_DIR / "fixed_between.urdf",
+    "humanoid": URDF_DIR / "humanoid.urdf",
     "panda": CONFIG_DIR / "panda.urdf",
 }
 
