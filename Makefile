@@ -16,6 +16,7 @@ test: $(VENV)/.installed-test
 bench: $(VENV)/.installed-test
 	$(BIN)/python bench/bench_recursion.py
 	$(BIN)/python bench/bench_stream.py
+	$(BIN)/python bench/bench_dds.py
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
