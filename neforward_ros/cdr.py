@@ -196,6 +196,7 @@ class MultiDofPoint:
         transforms: (n, 7): translation x, y, z, rotation x, y, z, w.
         velocities: (n, 6): linear x, y, z, angular x, y, z.
         accelerations: (n, 6): linear x, y, z, angular x, y, z.
+        offsets: byte offsets of the three blocks in the encoded message.
     """
 
     stamp_ns: int
@@ -204,6 +205,7 @@ class MultiDofPoint:
     transforms: np.ndarray
     velocities: np.ndarray
     accelerations: np.ndarray
+    offsets: tuple[int, int, int]
 
 
 def decode_multi_dof(data: bytes) -> MultiDofPoint:
@@ -233,7 +235,7 @@ def decode_multi_dof(data: bytes) -> MultiDofPoint:
         if points < 1:
             raise InputError("MultiDOFJointTrajectory without points")
         position += 4
-        blocks = []
+        blocks, offsets = [], []
         for width in (7, 6, 6):
             position += -(position - 4) & 3
             (n,) = struct.unpack_from("<I", data, position)
@@ -242,14 +244,96 @@ def decode_multi_dof(data: bytes) -> MultiDofPoint:
                 position += -(position - 4) & 7
             block = np.frombuffer(data, dtype="<f8", count=n * width, offset=position).reshape(n, width)
             blocks.append(block)
+            offsets.append(position)
             position += 8 * n * width
-    except struct.error as exc:
+    except (struct.error, ValueError) as exc:
         raise InputError(f"truncated MultiDOFJointTrajectory: {exc}") from exc
-    return MultiDofPoint(sec * 1_000_000_000 + nanosec, frame_id, tuple(names), *blocks)
+    return MultiDofPoint(sec * 1_000_000_000 + nanosec, frame_id, tuple(names), *blocks, tuple(offsets))
+
+
+_last_names: tuple[bytes, tuple[str, ...]] = (b"", ())
+
+
+def decode_joint_state(data: bytes) -> tuple[int, tuple[str, ...], np.ndarray, np.ndarray]:
+    """(stamp ns, names, positions, velocities) of sensor_msgs/JointState CDR bytes, without message objects.
+
+    For reading recordings of tens of thousands of joint states: when the names are byte for byte
+    those of the previous message (the usual case), they are not decoded again. Missing velocities
+    are an empty array.
+
+    Raises:
+        InputError: not little-endian CDR or truncated.
+    """
+    global _last_names
+    if data[:2] != HEADER[:2]:
+        raise InputError("not little-endian CDR (encapsulation 0x0001)")
+    try:
+        sec, nanosec = struct.unpack_from("<iI", data, 4)
+        _, position = _string(data, 12)
+        start = position + (-(position - 4) & 3)
+        region, names = _last_names
+        # the same names at the same alignment: reuse them
+        if region and data.startswith(region, start):
+            position = start + len(region)
+        else:
+            position = start
+            (count,) = struct.unpack_from("<I", data, position)
+            position += 4
+            decoded = []
+            for _ in range(count):
+                name, position = _string(data, position)
+                decoded.append(name)
+            names = tuple(decoded)
+            _last_names = (bytes(data[start:position]), names)
+        arrays = []
+        for _ in range(2):
+            position += -(position - 4) & 3
+            (n,) = struct.unpack_from("<I", data, position)
+            position += 4
+            if n:
+                position += -(position - 4) & 7
+            arrays.append(np.frombuffer(data, dtype="<f8", count=n, offset=position))
+            position += 8 * n
+    except (struct.error, ValueError, UnicodeDecodeError) as exc:
+        raise InputError(f"truncated or malformed JointState: {exc}") from exc
+    return sec * 1_000_000_000 + nanosec, names, arrays[0], arrays[1]
 
 
 def _string(data: bytes, position: int) -> tuple[str, int]:
     position += -(position - 4) & 3
     (length,) = struct.unpack_from("<I", data, position)
     start = position + 4
+    if length < 1 or start + length > len(data):
+        raise struct.error(f"string of {length} bytes at offset {position} runs past the end ({len(data)} bytes)")
     return data[start : start + length - 1].decode(), start + length
+
+
+def patch_multi_dof(
+    template: bytes, stamps_ns: np.ndarray, transforms: np.ndarray, velocities: np.ndarray, accelerations: np.ndarray
+) -> np.ndarray:
+    """Many MultiDOFJointTrajectory messages that differ from ``template`` only in stamp and numbers.
+
+    ``template`` is one encoded message (one point, n transforms, velocities and accelerations);
+    the result has one row of bytes per stamp, with the header stamp and the three numeric blocks
+    replaced: (T,), (T, n, 7), (T, n, 6), (T, n, 6). Strings and counts stay the template's, so
+    every row is exactly what :func:`encode` gives for the same contents (tested).
+    """
+    layout = decode_multi_dof(template)
+    count = len(stamps_ns)
+    shapes = {"transforms": (7, layout.transforms), "velocities": (6, layout.velocities)}
+    shapes["accelerations"] = (6, layout.accelerations)
+    out = np.tile(np.frombuffer(template, dtype=np.uint8), (count, 1))
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    sec, nanosec = np.divmod(stamps, 1_000_000_000)
+    out[:, 4:8] = sec.astype("<i4").view(np.uint8).reshape(count, 4)
+    out[:, 8:12] = nanosec.astype("<u4").view(np.uint8).reshape(count, 4)
+    for offset, (width, block), values in zip(
+        layout.offsets, shapes.values(), (transforms, velocities, accelerations), strict=True
+    ):
+        if values.shape != (count, block.shape[0], width):
+            raise InputError(
+                f"patch_multi_dof: block of shape {values.shape}, expected {(count, block.shape[0], width)}"
+            )
+        size = 8 * block.size
+        out[:, offset : offset + size] = np.ascontiguousarray(values, dtype="<f8").view(np.uint8).reshape(count, size)
+    return out

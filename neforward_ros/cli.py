@@ -130,6 +130,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--type", help="message type pkg/msg/Type (default: known for neforward's topics, else discovered)"
     )
     echo.add_argument("--count", type=int, help="exit after this many messages")
+    bag = commands.add_parser("bag", help="a rosbag2 recording of joint states in; the node's outputs out")
+    bag.add_argument("input", help="rosbag2 recording (folder or .mcap/.db3), sqlite3 or MCAP")
+    bag.add_argument("-o", "--output", required=True, help="output recording (must not exist)")
+    bag.add_argument("--urdf", help="URDF file (default: the recording's robot_description topic)")
+    bag.add_argument("--joint-states", help="joint-state topic (default: the recording's JointState topic)")
+    bag.add_argument("--csv", help="also write a CSV: one row per sample, columns per link and component")
+    bag.add_argument("--plot", help="also write a PNG of every link's |a| and |alpha| with the peaks marked")
+    bag.add_argument("--format", choices=("mcap", "sqlite3"), default="mcap", help="output storage (default mcap)")
+    bag.add_argument("--accel-links", default="", help="comma-separated links that also get accel and twist topics")
+    bag.add_argument("--imu-links", default="", help="comma-separated links that also get an imu topic")
+    bag.add_argument("--gravity", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"), help="m/s^2")
     return parser
 
 
@@ -155,6 +166,21 @@ def main(argv: Sequence[str] | None = None) -> int:
             from neforward_ros.dds.commands import run_node
 
             return run_node(args.urdf, args.params, ros_args)
+        elif args.command == "bag":
+            from neforward_ros.bag import BagOptions, Progress, describe, process_bag
+
+            options = BagOptions(
+                urdf=args.urdf,
+                joint_states_topic=args.joint_states,
+                storage=args.format,
+                accel_links=tuple(filter(None, args.accel_links.split(","))),
+                imu_links=tuple(filter(None, args.imu_links.split(","))),
+                gravity=tuple(args.gravity) if args.gravity else DEFAULT_GRAVITY,
+            )
+            report = process_bag(
+                args.input, args.output, options, csv_path=args.csv, plot_path=args.plot, progress=Progress()
+            )
+            print(describe(report))
         elif args.command == "echo":
             from neforward_ros.dds.commands import echo
 

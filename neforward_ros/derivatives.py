@@ -129,6 +129,52 @@ def estimate_derivatives(
     return qd, qdd
 
 
+def estimate_at(
+    t: np.ndarray,
+    q: np.ndarray,
+    targets: np.ndarray,
+    *,
+    velocity: np.ndarray | None = None,
+    method: str = "polyfit",
+    window: float = DEFAULT_WINDOW,
+    order: int = DEFAULT_ORDER,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions, velocities and accelerations at arbitrary target times, non-causal.
+
+    The whole-recording estimate for joints sampled at their own times (partial messages from
+    several drivers): columns of ``q`` share the sample times ``t``; ``targets`` need not be
+    samples. Where a target is a sample, its position (and given velocity) is used as it is.
+
+    Args:
+        t: sample times (T,), s, strictly increasing, T >= 3.
+        q: positions (T, m), already unwrapped.
+        targets: times (M,), s.
+        velocity: measured velocities (T, m), or None to differentiate positions; when given, the
+            acceleration is the derivative of velocity.
+        method, window, order: as for :func:`estimate_derivatives`.
+
+    Returns:
+        three (M, m) arrays.
+    """
+    _check_settings(method, window, order)
+    index = np.minimum(np.searchsorted(t, targets), len(t) - 1)
+    exact = t[index] == targets
+    if method == "difference":
+        d1 = np.gradient(q, t, axis=0, edge_order=2) if velocity is None else velocity
+        d2 = np.gradient(d1, t, axis=0, edge_order=2)
+        columns = range(q.shape[1])
+        q_at, qd_at, qdd_at = (np.stack([np.interp(targets, t, x[:, c]) for c in columns], axis=1) for x in (q, d1, d2))
+    else:
+        half_width = window / 2.0
+        q_at, qd_at, qdd_at = local_polynomial(t, q, targets, half_width, order)
+        if velocity is not None:
+            qd_at, qdd_at, _ = local_polynomial(t, velocity, targets, half_width, order)
+    q_at[exact] = q[index[exact]]
+    if velocity is not None:
+        qd_at[exact] = velocity[index[exact]]
+    return q_at, qd_at, qdd_at
+
+
 def local_polynomial(
     t: np.ndarray,
     y: np.ndarray,
@@ -168,7 +214,6 @@ def local_polynomial(
         lo[short] = np.clip(centre - needed // 2, 0, count - needed)
         hi[short] = lo[short] + needed
     width = int(np.max(hi - lo))
-    powers = np.arange(degree + 1)
     value, d1, d2 = (np.empty((len(targets), y.shape[1])) for _ in range(3))
     for start in range(0, len(targets), _CHUNK):
         block = slice(start, start + _CHUNK)
@@ -176,9 +221,12 @@ def local_polynomial(
         inside = index < hi[block, None]
         index = np.minimum(index, count - 1)
         tau = (t[index] - targets[block, None]) / half_width
-        basis = np.where(inside[..., None], tau[..., None] ** powers, 0.0)  # (M, width, degree + 1)
-        gram = np.einsum("mki,mkj->mij", basis, basis)
-        moments = np.einsum("mki,mkn->min", basis, y[index])
+        powers = np.empty((len(tau), degree + 1, width))  # tau^0 .. tau^degree per sample, 0 outside
+        powers[:, 0, :] = inside
+        for power in range(1, degree + 1):
+            np.multiply(powers[:, power - 1, :], tau, out=powers[:, power, :])
+        gram = powers @ powers.transpose(0, 2, 1)
+        moments = powers @ y[index]
         coefficients = np.linalg.solve(gram, moments)  # (M, degree + 1, n)
         value[block] = coefficients[:, 0]
         d1[block] = coefficients[:, 1] / half_width

@@ -68,14 +68,17 @@ def vector3(v: np.ndarray) -> Message:
 
 
 def quaternions(rotations: np.ndarray) -> np.ndarray:
-    """Unit quaternions (x, y, z, w) with w >= 0 of rotation matrices, shape (n, 3, 3) -> (n, 4).
+    """Unit quaternions (x, y, z, w) with w >= 0 of rotation matrices, shape (..., 3, 3) -> (..., 4).
 
     Shepperd's method: of the four formulas, each row uses the one whose pivot (4 w^2, 4 x^2, 4 y^2
-    or 4 z^2) is largest, which keeps full precision for every rotation. A plain loop: for the tens
-    of links of one sample it is several times faster than the vectorised form.
+    or 4 z^2) is largest, which keeps full precision for every rotation. The tens of links of one
+    sample go through a plain loop, several times faster there; batches are vectorised.
     """
+    r = np.asarray(rotations, dtype=float)
+    if r.size > 9 * 64:
+        return _quaternions_vectorised(r)
     out = []
-    for (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) in np.asarray(rotations, dtype=float).tolist():
+    for (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) in r.reshape(-1, 3, 3).tolist():
         trace = r00 + r11 + r22
         pivot = max(trace, r00, r11, r22)
         if pivot == trace:
@@ -93,7 +96,71 @@ def quaternions(rotations: np.ndarray) -> np.ndarray:
         norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
         sign = -1.0 if q[3] < 0.0 else 1.0
         out.append([sign * c / norm for c in q])
-    return np.array(out).reshape(-1, 4)
+    return np.array(out).reshape(*r.shape[:-2], 4)
+
+
+def _quaternions_vectorised(r: np.ndarray) -> np.ndarray:
+    flat = r.reshape(-1, 3, 3)
+    r00, r01, r02 = flat[:, 0, 0], flat[:, 0, 1], flat[:, 0, 2]
+    r10, r11, r12 = flat[:, 1, 0], flat[:, 1, 1], flat[:, 1, 2]
+    r20, r21, r22 = flat[:, 2, 0], flat[:, 2, 1], flat[:, 2, 2]
+    trace = r00 + r11 + r22
+    best = np.argmax(np.stack([trace, r00, r11, r22]), axis=0)
+    pivot = np.choose(best, (1.0 + trace, 1.0 + 2 * r00 - trace, 1.0 + 2 * r11 - trace, 1.0 + 2 * r22 - trace))
+    s = 2.0 * np.sqrt(np.maximum(pivot, 1e-300))
+    inverse, quarter = 1.0 / s, 0.25 * s
+    d21, d02, d10 = (r21 - r12) * inverse, (r02 - r20) * inverse, (r10 - r01) * inverse
+    s21, s02, s10 = (r21 + r12) * inverse, (r02 + r20) * inverse, (r10 + r01) * inverse
+    q = np.stack(
+        [
+            np.choose(best, (d21, quarter, s10, s02)),
+            np.choose(best, (d02, s10, quarter, s21)),
+            np.choose(best, (d10, s02, s21, quarter)),
+            np.choose(best, (quarter, d21, d02, d10)),
+        ],
+        axis=1,
+    )
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q[q[:, 3] < 0.0] *= -1.0
+    return q.reshape(*r.shape[:-2], 4)
+
+
+def multi_dof_blocks(
+    positions: np.ndarray,
+    orientations: np.ndarray,
+    linear_velocities: np.ndarray,
+    angular_velocities: np.ndarray,
+    linear_accelerations: np.ndarray,
+    angular_accelerations: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The numbers of a MultiDOFJointTrajectory point: transforms (..., n, 7) = translation,
+    rotation (x, y, z, w); velocities (..., n, 6) = linear, angular; accelerations likewise."""
+    return (
+        np.concatenate([positions, orientations], axis=-1),
+        np.concatenate([linear_velocities, angular_velocities], axis=-1),
+        np.concatenate([linear_accelerations, angular_accelerations], axis=-1),
+    )
+
+
+def link_states_blocks(result: Result) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`multi_dof_blocks` of link_states (works on batched results too)."""
+    root = result.in_root
+    return multi_dof_blocks(
+        root.position, result.orientation_in_root, root.velocity, root.omega, root.accel, root.alpha
+    )
+
+
+def com_states_blocks(result: Result) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`multi_dof_blocks` of com_states (works on batched results too)."""
+    root = result.in_root
+    return multi_dof_blocks(
+        result.com_position_in_root,
+        result.orientation_in_root,
+        result.com_velocity_in_root,
+        root.omega,
+        root.com_accel,
+        root.alpha,
+    )
 
 
 def _quaternion(q: np.ndarray) -> Message:
@@ -101,34 +168,18 @@ def _quaternion(q: np.ndarray) -> Message:
     return {"x": x, "y": y, "z": z, "w": w}
 
 
-def _multi_dof(
-    result: Result,
-    frame_prefix: str,
-    positions: np.ndarray,
-    linear_velocities: np.ndarray,
-    linear_accelerations: np.ndarray,
-) -> Message:
-    root = result.in_root
-    rows = zip(
-        positions.tolist(),
-        result.orientation_in_root.tolist(),
-        linear_velocities.tolist(),
-        root.omega.tolist(),
-        linear_accelerations.tolist(),
-        root.alpha.tolist(),
-        strict=True,
-    )
+def _multi_dof(result: Result, frame_prefix: str, blocks: tuple[np.ndarray, np.ndarray, np.ndarray]) -> Message:
     transforms, velocities, accelerations = [], [], []
-    for p, q, v, w, a, alpha in rows:
+    for t, v, a in zip(*(block.tolist() for block in blocks), strict=True):
         transforms.append(
             {
-                "translation": {"x": p[0], "y": p[1], "z": p[2]},
-                "rotation": {"x": q[0], "y": q[1], "z": q[2], "w": q[3]},
+                "translation": {"x": t[0], "y": t[1], "z": t[2]},
+                "rotation": {"x": t[3], "y": t[4], "z": t[5], "w": t[6]},
             }
         )
-        velocities.append({"linear": {"x": v[0], "y": v[1], "z": v[2]}, "angular": {"x": w[0], "y": w[1], "z": w[2]}})
+        velocities.append({"linear": {"x": v[0], "y": v[1], "z": v[2]}, "angular": {"x": v[3], "y": v[4], "z": v[5]}})
         accelerations.append(
-            {"linear": {"x": a[0], "y": a[1], "z": a[2]}, "angular": {"x": alpha[0], "y": alpha[1], "z": alpha[2]}}
+            {"linear": {"x": a[0], "y": a[1], "z": a[2]}, "angular": {"x": a[3], "y": a[4], "z": a[5]}}
         )
     return {
         "header": header(result.stamp_ns, frame_prefix + result.root_link),
@@ -148,16 +199,13 @@ def link_states(result: Result, frame_prefix: str = "") -> Message:
     """trajectory_msgs/MultiDOFJointTrajectory: for each link (``joint_names`` = link names), the pose of
     its frame in the root frame, the twist (v of the origin, omega) and the acceleration (specific
     force at the origin, alpha), vectors along the root axes; one point, stamped with the input's stamp."""
-    root = result.in_root
-    return _multi_dof(result, frame_prefix, root.position, root.velocity, root.accel)
+    return _multi_dof(result, frame_prefix, link_states_blocks(result))
 
 
 def com_states(result: Result, frame_prefix: str = "") -> Message:
     """As :func:`link_states` for each link's centre of mass: translation = the COM in the root frame
     (rotation = the link's), twist and acceleration of the COM point, along the root axes."""
-    return _multi_dof(
-        result, frame_prefix, result.com_position_in_root, result.com_velocity_in_root, result.in_root.com_accel
-    )
+    return _multi_dof(result, frame_prefix, com_states_blocks(result))
 
 
 def accel_stamped(result: Result, link: int, frame_prefix: str = "") -> Message:

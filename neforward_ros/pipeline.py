@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -67,7 +67,25 @@ class Result:
     com_position_in_root: np.ndarray
     com_velocity_in_root: np.ndarray
     orientation_in_root: np.ndarray
-    joints: JointEstimate
+    joints: Any
+
+    def sample(self, index: int) -> Result:
+        """One sample of a batched result (arrays with a leading sample axis)."""
+
+        def pick(kin: LinkKinematics) -> LinkKinematics:
+            fields = ("omega", "alpha", "velocity", "accel", "com_accel", "position", "rotation")
+            return replace(kin, **{name: getattr(kin, name)[index] for name in fields})
+
+        return replace(
+            self,
+            stamp_ns=int(self.stamp_ns[index]),
+            in_link=pick(self.in_link),
+            in_root=pick(self.in_root),
+            com_position_in_root=self.com_position_in_root[index],
+            com_velocity_in_root=self.com_velocity_in_root[index],
+            orientation_in_root=self.orientation_in_root[index],
+            joints=None,
+        )
 
 
 @dataclass(frozen=True)
@@ -98,7 +116,6 @@ class Pipeline:
         self._log = ThrottledLog(log)
         self.model: RobotModel | None = None
         self._estimator: StreamingEstimator | None = None
-        self._com_in_link = np.zeros((0, 3))
         self._per_link: list[tuple[str, int]] = []  # (kind, link index) of per-link outputs
         for link in (*settings.accel_links, *settings.imu_links):
             if not _TOKEN.match(link):
@@ -138,7 +155,6 @@ class Pipeline:
                 "nothing is published for them",
             )
         self.model = model
-        self._com_in_link = np.asarray(model.com_in_link, dtype=float)
         wrap = [False] * len(model.joint_names)
         for joint in model.parent_joints:
             if joint is not None and joint.mimic_of is None and joint.kind is JointKind.CONTINUOUS:
@@ -305,18 +321,30 @@ class Pipeline:
         in_link = forward_recursion(
             model, estimate.positions, estimate.velocities, estimate.accelerations, gravity=self.settings.gravity
         )
-        in_root = in_link.in_root()
-        c = self._com_in_link
-        com_velocity_in_link = in_link.velocity + np.cross(in_link.omega, c)
-        rotation = in_link.rotation
-        return Result(
-            stamp_ns=estimate.stamp_ns,
-            link_names=model.link_names,
-            root_link=model.root_link,
-            in_link=in_link,
-            in_root=in_root,
-            com_position_in_root=in_link.position + np.einsum("kij,kj->ki", rotation, c),
-            com_velocity_in_root=np.einsum("kij,kj->ki", rotation, com_velocity_in_link),
-            orientation_in_root=messages.quaternions(rotation),
-            joints=estimate,
-        )
+        return make_result(model, estimate.stamp_ns, in_link, estimate)
+
+
+def make_result(model: RobotModel, stamp_ns: Any, in_link: LinkKinematics, joints: Any) -> Result:
+    """A Result from the recursion's output, for one sample or (with a leading sample axis) many.
+
+    Args:
+        model: the robot.
+        stamp_ns: int, or (T,) integer nanoseconds for a batch.
+        in_link: forward_recursion's output (vectors in link frames).
+        joints: the joint states it came from (a JointEstimate, or the batch's arrays).
+    """
+    in_root = in_link.in_root()
+    c = np.asarray(model.com_in_link, dtype=float)
+    com_velocity_in_link = in_link.velocity + np.cross(in_link.omega, c)
+    rotation = in_link.rotation
+    return Result(
+        stamp_ns=stamp_ns,
+        link_names=model.link_names,
+        root_link=model.root_link,
+        in_link=in_link,
+        in_root=in_root,
+        com_position_in_root=in_link.position + (rotation @ c[:, :, None])[..., 0],
+        com_velocity_in_root=np.einsum("...kij,...kj->...ki", rotation, com_velocity_in_link),
+        orientation_in_root=messages.quaternions(rotation),
+        joints=joints,
+    )

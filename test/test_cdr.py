@@ -110,3 +110,16 @@ def test_multi_dof_decoder_reads_what_rosbags_reads(contents) -> None:
     velocities = [[*v["linear"].values(), *v["angular"].values()] for v in point["velocities"]]
     assert decoded.velocities.tolist() == velocities
     assert decoded.accelerations.shape == (len(point["accelerations"]), 6)
+
+
+@settings(max_examples=80, deadline=None)
+@given(contents=SAMPLES["sensor_msgs/msg/JointState"])
+def test_joint_state_decoder_reads_what_rosbags_reads(contents) -> None:
+    encoded = cdr.encode("sensor_msgs/msg/JointState", contents)
+    stamp, names, positions, velocities = cdr.decode_joint_state(encoded)
+    expected = rostypes.deserialize("sensor_msgs/msg/JointState", encoded)
+    assert stamp == expected["header"]["stamp"]["sec"] * 10**9 + expected["header"]["stamp"]["nanosec"]
+    assert list(names) == expected["name"]
+    assert positions.tolist() == expected["position"] and velocities.tolist() == expected["velocity"]
+    with pytest.raises(InputError):
+        cdr.decode_joint_state(encoded[: len(encoded) // 2] if len(encoded) > 40 else b"\x01\x00")

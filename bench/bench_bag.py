@@ -1,0 +1,87 @@
+"""``neforward bag`` speed against rosbags alone, measured in one run.
+
+Writes a 60 s, 500 Hz recording of the bundled arm's joint states (7 arm joints and the finger,
+positions only, MCAP), then times (a) rosbags reading and deserializing every JointState message
+(``Typestore.deserialize_cdr``), the peer, and (b) the whole ``neforward bag`` run: reading,
+estimation, recursion, writing link_states and com_states to a new MCAP recording. Prints both and
+their ratio (the target is at most 3). Interleaved repeats; medians.
+
+Usage: python bench/bench_bag.py [--seconds 60] [--repeats 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+
+from neforward_ros import cdr, load_model, messages
+from neforward_ros.bag import BagOptions, process_bag
+from neforward_ros.rostypes import typestore
+
+URDF = Path(__file__).resolve().parent.parent / "config" / "panda.urdf"
+
+
+def make_recording(path: Path, seconds: float) -> int:
+    model = load_model(URDF)
+    names = list(model.joint_names)
+    count = int(seconds * 500)
+    rng = np.random.default_rng(0)
+    t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
+    q = 0.4 * np.sin(np.outer(t, np.linspace(1.0, 4.0, len(names))))
+    q[:, -1] *= 0.05  # the finger, in m
+    store = typestore()
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        connection = writer.add_connection("/joint_states", messages.JOINT_STATE_TYPE, typestore=store)
+        for k in range(count):
+            stamp = 1_700_000_000 * 10**9 + round(t[k] * 1e9)
+            contents = {"header": {"stamp": messages.time(stamp)}, "name": names, "position": q[k].tolist()}
+            writer.write(connection, stamp, cdr.encode(messages.JOINT_STATE_TYPE, contents))
+    return count
+
+
+def rosbags_alone(path: Path) -> float:
+    store = typestore()
+    start = time.perf_counter()
+    with Reader(path) as reader:
+        for connection, _, raw in reader.messages():
+            store.deserialize_cdr(raw, connection.msgtype)
+    return time.perf_counter() - start
+
+
+def neforward_bag(path: Path, output: Path) -> float:
+    shutil.rmtree(output, ignore_errors=True)
+    start = time.perf_counter()
+    process_bag(path, output, BagOptions(urdf=str(URDF)))
+    return time.perf_counter() - start
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    folder = Path(tempfile.mkdtemp(prefix="neforward-bench-bag-"))
+    try:
+        count = make_recording(folder / "in", args.seconds)
+        peer, ours = [], []
+        for _ in range(args.repeats):
+            peer.append(rosbags_alone(folder / "in"))
+            ours.append(neforward_bag(folder / "in", folder / "out"))
+        a, b = statistics.median(peer), statistics.median(ours)
+        print(f"{count} joint states ({args.seconds:g} s at 500 Hz, 8 joints), median of {args.repeats}")
+        print(f"rosbags read + deserialize: {a:.2f} s")
+        print(f"neforward bag (read, estimate, recursion, write 2 x {count} messages): {b:.2f} s")
+        print(f"ratio neforward / rosbags alone: {b / a:.2f} (target <= 3)")
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,239 @@
+"""neforward bag: recordings written with rosbags, processed, read back and compared with Pinocchio
+on the analytic trajectory; every bad-input case gives one error line and no output."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+
+from neforward_ros import cdr, messages
+from neforward_ros.bag import BagOptions, process_bag
+from neforward_ros.cli import main
+from neforward_ros.rostypes import typestore
+
+from conftest import CONFIG_DIR
+from oracle import PinocchioOracle
+
+PANDA = CONFIG_DIR / "panda.urdf"
+EPOCH = 1_700_000_000 * 10**9
+FREQUENCIES = np.linspace(0.3, 1.2, 8)
+AMPLITUDES = np.array([0.5, 0.4, 0.5, 0.4, 0.5, 0.4, 0.5, 0.01])  # the last is the finger (prismatic, m)
+NAMES = [f"panda_joint{k}" for k in range(1, 8)] + ["panda_finger_joint1"]
+
+
+def trajectory(t: np.ndarray):
+    w = 2 * np.pi * FREQUENCIES
+    arg = np.outer(t, w) + np.arange(8)
+    return AMPLITUDES * np.sin(arg), AMPLITUDES * w * np.cos(arg), -AMPLITUDES * w**2 * np.sin(arg)
+
+
+def record(path, *, seconds=4.0, velocities=False, storage=StoragePlugin.MCAP, description=True, runs=1, **extra):
+    rng = np.random.default_rng(1)
+    count = int(seconds * 500)
+    t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
+    q, qd, _ = trajectory(t)
+    store = typestore()
+    with Writer(path, version=9, storage_plugin=storage) as writer:
+        joint_states = writer.add_connection("/joint_states", messages.JOINT_STATE_TYPE, typestore=store)
+        if description:
+            connection = writer.add_connection("/robot_description", messages.STRING_TYPE, typestore=store)
+            writer.write(connection, EPOCH, cdr.encode(messages.STRING_TYPE, {"data": PANDA.read_text()}))
+        for topic, kind in extra.get("other_topics", []):
+            writer.add_connection(topic, kind, typestore=store)
+        names = extra.get("names", NAMES)
+        for run in range(runs):  # concatenated runs: stamps go back at each new run
+            for k in range(count):
+                stamp = EPOCH + round(t[k] * 1e9)
+                contents = {"header": {"stamp": messages.time(stamp)}, "name": names, "position": q[k].tolist()}
+                if velocities:
+                    contents["velocity"] = qd[k].tolist()
+                log_time = EPOCH + run * 10**10 + round(t[k] * 1e9)
+                writer.write(joint_states, log_time, cdr.encode(messages.JOINT_STATE_TYPE, contents))
+    return t
+
+
+def read_output(path) -> dict[str, list]:
+    out: dict[str, list] = {}
+    with Reader(path) as reader:
+        for connection, log_time, raw in reader.messages():
+            out.setdefault(connection.topic, []).append((log_time, raw))
+    return out
+
+
+def relative_rms(estimate, truth) -> float:
+    return float(np.sqrt(np.mean((estimate - truth) ** 2) / np.mean(truth**2)))
+
+
+def check_against_pinocchio(link_states: list, com_states: list) -> None:
+    oracle = PinocchioOracle(PANDA)
+    from neforward_ros import load_model
+
+    model = load_model(PANDA)
+    got, want, got_com, want_com, got_alpha, want_alpha = [], [], [], [], [], []
+    for (_, raw), (_, raw_com) in list(zip(link_states, com_states, strict=True))[::25]:
+        point, com = cdr.decode_multi_dof(raw), cdr.decode_multi_dof(raw_com)
+        tk = (point.stamp_ns - EPOCH) / 1e9
+        q, qd, qdd = (x[0] for x in trajectory(np.array([tk])))
+        expected = oracle.kinematics(model.joint_names, model.link_names, q, qd, qdd)
+        rotation = expected["rotation"]
+        got.append(point.accelerations[:, :3])
+        want.append(np.einsum("kij,kj->ki", rotation, expected["accel"]))
+        got_alpha.append(point.accelerations[:, 3:])
+        want_alpha.append(np.einsum("kij,kj->ki", rotation, expected["alpha"]))
+        got_com.append(com.accelerations[:, :3])
+        want_com.append(np.einsum("kij,kj->ki", rotation, expected["com_accel"]))
+    gravity = np.array([0.0, 0.0, 9.81])  # compare kinematic parts: the specific force minus +g
+    assert relative_rms(np.array(got) - gravity, np.array(want) - gravity) <= 1e-2
+    assert relative_rms(np.array(got_com) - gravity, np.array(want_com) - gravity) <= 1e-2
+    assert relative_rms(np.array(got_alpha), np.array(want_alpha)) <= 1e-2
+
+
+@pytest.mark.parametrize(
+    "storage, velocities", [(StoragePlugin.MCAP, False), (StoragePlugin.SQLITE3, True), (StoragePlugin.MCAP, True)]
+)
+def test_outputs_match_pinocchio_on_the_analytic_trajectory(tmp_path, storage, velocities) -> None:
+    record(tmp_path / "in", storage=storage, velocities=velocities)
+    assert main(["bag", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--imu-links", "panda_hand"]) == 0
+    out = read_output(tmp_path / "out")
+    assert set(out) == {"/neforward/link_states", "/neforward/com_states", "/neforward/panda_hand/imu"}
+    assert len(out["/neforward/link_states"]) == 2000
+    check_against_pinocchio(out["/neforward/link_states"], out["/neforward/com_states"])
+    log_time, raw = out["/neforward/panda_hand/imu"][0]
+    imu = typestore().deserialize_cdr(raw, messages.IMU_TYPE)
+    assert imu.header.frame_id == "panda_hand" and log_time == out["/neforward/link_states"][0][0]
+
+
+def test_batched_messages_equal_the_node_message_building(tmp_path) -> None:
+    """The bag's vectorised encoding gives the same bytes as the node's per-message path."""
+    from neforward_ros import forward_recursion, load_model
+    from neforward_ros.pipeline import make_result
+
+    model = load_model(PANDA)
+    t = np.linspace(0.0, 1.0, 7)
+    q, qd, qdd = trajectory(t)
+    stamps = EPOCH + np.round(t * 1e9).astype(np.int64)
+    batch = make_result(model, stamps, forward_recursion(model, q, qd, qdd), None)
+    for builder, blocks in (
+        (messages.link_states, messages.link_states_blocks),
+        (messages.com_states, messages.com_states_blocks),
+    ):
+        template = cdr.encode(messages.LINK_STATES_TYPE, builder(batch.sample(0), "p/"))
+        rows = cdr.patch_multi_dof(template, stamps, *blocks(batch))
+        for i in range(len(t)):
+            # byte for byte what the per-message path encodes from the same numbers
+            assert rows[i].tobytes() == cdr.encode(messages.LINK_STATES_TYPE, builder(batch.sample(i), "p/"))
+            # and the same numbers as the node's single-sample computation, to rounding
+            single = make_result(model, int(stamps[i]), forward_recursion(model, q[i], qd[i], qdd[i]), None)
+            a = cdr.decode_multi_dof(rows[i].tobytes())
+            b = cdr.decode_multi_dof(cdr.encode(messages.LINK_STATES_TYPE, builder(single, "p/")))
+            assert a.stamp_ns == b.stamp_ns and a.joint_names == b.joint_names
+            for x, y in zip(
+                (a.transforms, a.velocities, a.accelerations),
+                (b.transforms, b.velocities, b.accelerations),
+                strict=True,
+            ):
+                np.testing.assert_allclose(x, y, rtol=0, atol=1e-12)
+
+
+def test_concatenated_runs_are_segments_each_estimated_on_its_own(tmp_path, capsys) -> None:
+    record(tmp_path / "in", runs=2, seconds=2.0)
+    assert main(["bag", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--urdf", str(PANDA)]) == 0
+    printed = capsys.readouterr().out
+    assert "2 segments" in printed and "segment 2: 1000 messages" in printed
+    out = read_output(tmp_path / "out")
+    assert len(out["/neforward/link_states"]) == 2000
+    halves = out["/neforward/link_states"][:1000], out["/neforward/link_states"][1000:]
+    for half, com in zip(
+        halves, (out["/neforward/com_states"][:1000], out["/neforward/com_states"][1000:]), strict=True
+    ):
+        check_against_pinocchio(half, com)
+
+
+def test_csv_and_plot(tmp_path) -> None:
+    record(tmp_path / "in", seconds=1.0)
+    report = process_bag(
+        tmp_path / "in", tmp_path / "out", BagOptions(), csv_path=tmp_path / "a.csv", plot_path=tmp_path / "a.png"
+    )
+    assert report.samples_out == 500
+    lines = (tmp_path / "a.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[:2] == ["stamp_ns", "t[s]"]
+    assert "panda_hand.accel_in_root.z[m/s^2]" in header and "panda_tcp.alpha_in_root.x[rad/s^2]" in header
+    assert len(lines) == 501 and len(lines[1].split(",")) == len(header)
+    base = lines[1].split(",")
+    assert float(base[header.index("panda_link0.accel_in_root.z[m/s^2]")]) == pytest.approx(9.81)
+    assert (tmp_path / "a.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not [p for p in tmp_path.iterdir() if "partial" in p.name]
+
+
+def bad_cases(tmp_path):
+    (tmp_path / "text.txt").write_text("hello")
+    record(tmp_path / "no_js", seconds=0.1, description=True, names=NAMES, other_topics=[])
+    with Writer(tmp_path / "only_other", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        connection = writer.add_connection("/odom_text", messages.STRING_TYPE, typestore=typestore())
+        writer.write(connection, EPOCH, cdr.encode(messages.STRING_TYPE, {"data": "x"}))
+    record(tmp_path / "missing_joint", seconds=0.2, names=[*NAMES[:-1], "not_the_finger"])
+    record(tmp_path / "corrupt", seconds=1.0)
+    storage = next((tmp_path / "corrupt").glob("*.mcap"))
+    data = storage.read_bytes()
+    storage.write_bytes(data[: len(data) // 2])
+    record(tmp_path / "ok", seconds=0.2)
+    (tmp_path / "exists").mkdir()
+    return [
+        ([str(tmp_path / "nope"), "-o", str(tmp_path / "o1")], "no such file or directory", tmp_path / "o1"),
+        (
+            [str(tmp_path / "text.txt"), "-o", str(tmp_path / "o2")],
+            "is not a readable rosbag2 recording",
+            tmp_path / "o2",
+        ),
+        (
+            [str(tmp_path / "only_other"), "-o", str(tmp_path / "o3")],
+            "no sensor_msgs/msg/JointState topic",
+            tmp_path / "o3",
+        ),
+        (
+            [str(tmp_path / "missing_joint"), "-o", str(tmp_path / "o4")],
+            "missing from /joint_states: panda_finger_joint1",
+            tmp_path / "o4",
+        ),
+        ([str(tmp_path / "corrupt"), "-o", str(tmp_path / "o5")], "truncated or corrupt", tmp_path / "o5"),
+        ([str(tmp_path / "ok"), "-o", str(tmp_path / "exists")], "exists already", None),
+        (
+            [str(tmp_path / "ok"), "-o", str(tmp_path / "o7"), "--urdf", str(tmp_path / "text.txt")],
+            "URDF",
+            tmp_path / "o7",
+        ),
+    ]
+
+
+def test_bad_input_is_one_error_line_and_no_output(tmp_path, capsys) -> None:
+    for arguments, text, output in bad_cases(tmp_path):
+        assert main(["bag", *arguments]) == 1, arguments
+        err = capsys.readouterr().err
+        assert err.startswith("neforward: error: ") and err.count("\n") == 1, err
+        assert text in err, err
+        if output is not None:
+            assert not output.exists()
+        assert not [p for p in tmp_path.iterdir() if "partial" in p.name]
+    # the topic listing names what is there
+    assert main(["bag", str(tmp_path / "only_other"), "-o", str(tmp_path / "o8")]) == 1
+    assert "/odom_text (std_msgs/msg/String)" in capsys.readouterr().err
+
+
+def test_batched_mcap_writing_equals_rosbags_message_by_message(tmp_path, monkeypatch) -> None:
+    from neforward_ros import bag
+
+    record(tmp_path / "in", seconds=3.0)
+    process_bag(tmp_path / "in", tmp_path / "fast", BagOptions())
+    monkeypatch.setattr(bag, "_FAST_MCAP", False)
+    process_bag(tmp_path / "in", tmp_path / "slow", BagOptions())
+    fast, slow = read_output(tmp_path / "fast"), read_output(tmp_path / "slow")
+    assert fast.keys() == slow.keys() and all(fast[topic] == slow[topic] for topic in fast)
+    with Reader(tmp_path / "fast") as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+        assert counts == {"/neforward/link_states": 1500, "/neforward/com_states": 1500}
+        assert reader.duration > 2.9e9
+        # read back through the chunk indexes too (what players use), not only in file order
+        window = list(reader.messages(start=reader.start_time + 10**9, stop=reader.start_time + 2 * 10**9))
+    assert 990 <= len(window) <= 1010  # about 1 s of both topics at 500 Hz
