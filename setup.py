@@ -23,7 +23,10 @@ setup(
         "rosbags>=0.10",
         "cyclonedds>=0.10.5",
     ],
-    extras_require={"test": ["pytest>=7", "pin>=3.4", "hypothesis>=6", "scipy>=1.11", "ruff>=0.6"]},
+    extras_require={
+        "plot": ["matplotlib>=3.6"],
+        "test": ["pytest>=7", "pin>=3.4", "hypothesis>=6", "scipy>=1.11", "matplotlib>=3.6", "ruff>=0.6"],
+    },
     zip_safe=True,
     maintainer="neforward_ros developers",
     maintainer_email="neforward-ros@example.com",

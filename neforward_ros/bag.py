@@ -153,6 +153,11 @@ def process_bag(
     for path in (output, csv_path, plot_path):
         if path is not None and Path(path).exists():
             raise InputError(f"{path} exists already; remove it or choose another name")
+    if plot_path is not None:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError as exc:
+            raise InputError("--plot needs matplotlib: pip install 'neforward_ros[plot]' (or matplotlib)") from exc
     recording = _read(source, options, progress)
     model = recording.model
     for link in (*options.accel_links, *options.imu_links):
