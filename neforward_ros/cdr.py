@@ -20,25 +20,11 @@ from typing import Any
 import numpy as np
 
 from neforward_ros.errors import InputError
+from neforward_ros.rostypes import PRIMITIVES as _PRIMITIVES
 from neforward_ros.rostypes import typestore
 
 HEADER = b"\x00\x01\x00\x00"  # CDR_LE encapsulation, options 0
 
-_PRIMITIVES = {  # struct code, size (= CDR alignment), default
-    "bool": ("?", 1, False),
-    "byte": ("B", 1, 0),
-    "char": ("B", 1, 0),
-    "uint8": ("B", 1, 0),
-    "int8": ("b", 1, 0),
-    "uint16": ("H", 2, 0),
-    "int16": ("h", 2, 0),
-    "uint32": ("I", 4, 0),
-    "int32": ("i", 4, 0),
-    "uint64": ("Q", 8, 0),
-    "int64": ("q", 8, 0),
-    "float32": ("f", 4, 0.0),
-    "float64": ("d", 8, 0.0),
-}
 _ZEROS = tuple(b"\0" * n for n in range(8))
 _EMPTY: Mapping[str, Any] = {}
 

@@ -16,21 +16,22 @@ import numpy as np
 
 from neforward_ros.errors import InputError
 
-_DTYPES = {
-    "bool": np.bool_,
-    "byte": np.uint8,
-    "char": np.uint8,
-    "uint8": np.uint8,
-    "int8": np.int8,
-    "uint16": np.uint16,
-    "int16": np.int16,
-    "uint32": np.uint32,
-    "int32": np.int32,
-    "uint64": np.uint64,
-    "int64": np.int64,
-    "float32": np.float32,
-    "float64": np.float64,
+PRIMITIVES = {  # ROS 2 primitive type: struct code (little endian), size (= CDR alignment), default
+    "bool": ("?", 1, False),
+    "byte": ("B", 1, 0),
+    "char": ("B", 1, 0),
+    "uint8": ("B", 1, 0),
+    "int8": ("b", 1, 0),
+    "uint16": ("H", 2, 0),
+    "int16": ("h", 2, 0),
+    "uint32": ("I", 4, 0),
+    "int32": ("i", 4, 0),
+    "uint64": ("Q", 8, 0),
+    "int64": ("q", 8, 0),
+    "float32": ("f", 4, 0.0),
+    "float64": ("d", 8, 0.0),
 }
+_DTYPES = {name: np.dtype("<" + code).type for name, (code, _, _) in PRIMITIVES.items()}
 
 
 @cache
