@@ -339,3 +339,24 @@ def test_echo_prints_yaml_like_ros2_topic_echo(start, config_uri, domain) -> Non
     assert len(documents) == 2
     assert documents[0].startswith("header:\n  stamp:\n    sec: ")
     assert "frame_id: panda_hand" in documents[0] and "accel:\n  linear:\n    x: " in documents[0]
+
+
+def test_use_sim_time_stamps_zero_stamped_input_with_the_clock_topic(start, domain) -> None:
+    node = start("--urdf", str(PANDA), "--ros-args", "-p", "use_sim_time:=true", "-p", "estimator.mode:=causal")
+    peer = Peer(domain)
+    peer.writer("/joint_states", messages.JOINT_STATE_TYPE)
+    peer.writer("/clock", "rosgraph_msgs/msg/Clock")
+    peer.reader("/neforward/link_states", messages.LINK_STATES_TYPE)
+    peer.wait_connected(node)
+    q = np.zeros(len(NAMES)).tolist()
+    received: dict[str, list[bytes]] = {"/neforward/link_states": []}
+    sim = 42 * 10**9
+    for k in range(10):  # the simulator's clock ticks, the driver leaves header.stamp empty
+        peer.write("/clock", {"clock": messages.time(sim + k * 10_000_000)})
+        time.sleep(0.02)
+        peer.write("/joint_states", joint_state(0, NAMES, q))
+        time.sleep(0.02)
+    collect(peer, received, lambda r: len(r["/neforward/link_states"]) >= 8)
+    stamps = [cdr.decode_multi_dof(b).stamp_ns for b in received["/neforward/link_states"]]
+    assert stamps and all(sim <= s < sim + 10**8 for s in stamps), stamps
+    assert "zero header.stamp" in node.log()
