@@ -31,7 +31,7 @@ from neforward_ros.derivatives import (
     estimate_at,
 )
 from neforward_ros.errors import InputError, ModelError
-from neforward_ros.model import JointKind, RobotModel, load_model
+from neforward_ros.model import RobotModel, load_model
 from neforward_ros.pipeline import Result, make_result
 from neforward_ros.recursion import DEFAULT_GRAVITY, forward_recursion
 from neforward_ros.rostypes import typestore
@@ -329,10 +329,7 @@ def _segments(recording: _Recording) -> list[tuple[int, int]]:
 
 def _compute(recording: _Recording, options: BagOptions, progress: Callable[[str, float], None]) -> _Batch:
     model = recording.model
-    wrap = [False] * len(model.joint_names)
-    for joint in model.parent_joints:
-        if joint is not None and joint.mimic_of is None and joint.kind is JointKind.CONTINUOUS:
-            wrap[joint.q_index] = True
+    wrap = model.continuous_columns
     pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
     ranges = _segments(recording)
     for number, (start, stop) in enumerate(ranges):

@@ -119,6 +119,15 @@ class RobotModel:
         """Movable joints that follow another joint (not columns of q), in link order."""
         return tuple(j.name for j in self.parent_joints if j is not None and j.mimic_of is not None)
 
+    @property
+    def continuous_columns(self) -> tuple[bool, ...]:
+        """Per column of q, True for a continuous joint: its positions wrap at +-pi."""
+        columns = [False] * len(self.joint_names)
+        for joint in self.parent_joints:
+            if joint is not None and joint.mimic_of is None and joint.kind is JointKind.CONTINUOUS:
+                columns[joint.q_index] = True
+        return tuple(columns)
+
 
 _SUPPORTED_TYPES = {kind.value: kind for kind in JointKind}
 _UNSUPPORTED_TYPES = {"floating", "planar"}

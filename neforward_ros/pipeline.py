@@ -20,7 +20,7 @@ from neforward_ros import messages
 from neforward_ros.derivatives import JointEstimate, StreamingEstimator
 from neforward_ros.errors import ModelError
 from neforward_ros.logs import LogFunction, ThrottledLog
-from neforward_ros.model import JointKind, RobotModel, load_model
+from neforward_ros.model import RobotModel, load_model
 from neforward_ros.parameters import NodeSettings
 from neforward_ros.recursion import LinkKinematics, forward_recursion
 
@@ -155,13 +155,9 @@ class Pipeline:
                 "nothing is published for them",
             )
         self.model = model
-        wrap = [False] * len(model.joint_names)
-        for joint in model.parent_joints:
-            if joint is not None and joint.mimic_of is None and joint.kind is JointKind.CONTINUOUS:
-                wrap[joint.q_index] = True
         self._estimator = StreamingEstimator(
             model.joint_names,
-            wrap=wrap,
+            wrap=model.continuous_columns,
             ignored_names=model.mimic_joint_names,
             settings=self.settings.estimator,
             log=self._log_function,

@@ -191,3 +191,16 @@ def test_bad_gravity_raises_input_error(gravity) -> None:
     model = load_model(CHAIN)
     with pytest.raises(InputError, match="gravity"):
         forward_recursion(model, [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], gravity=gravity)
+
+
+def test_continuous_columns_mark_the_wrapping_joints() -> None:
+    xml = (
+        "<robot name='c'><link name='a'/><link name='b'/><link name='c'/><link name='d'/>"
+        "<joint name='r' type='revolute'><parent link='a'/><child link='b'/><axis xyz='0 0 1'/>"
+        "<limit lower='-1' upper='1' effort='1' velocity='1'/></joint>"
+        "<joint name='w' type='continuous'><parent link='b'/><child link='c'/><axis xyz='1 0 0'/></joint>"
+        "<joint name='m' type='continuous'><parent link='c'/><child link='d'/><axis xyz='1 0 0'/>"
+        "<mimic joint='w'/></joint></robot>"
+    )
+    model = load_model(xml)
+    assert model.joint_names == ("r", "w") and model.continuous_columns == (False, True)
