@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from neforward_ros import cdr, messages
+from neforward_ros.dds.names import NodeNames
 from neforward_ros.derivatives import (
     DEFAULT_MAX_GAP,
     DEFAULT_ORDER,
@@ -32,11 +33,10 @@ from neforward_ros.derivatives import (
 )
 from neforward_ros.errors import InputError, ModelError
 from neforward_ros.model import RobotModel, load_model
-from neforward_ros.pipeline import Result, make_result
+from neforward_ros.pipeline import COM_STATES, LINK_STATES, Result, make_result, output_list, per_link_messages
 from neforward_ros.recursion import DEFAULT_GRAVITY, forward_recursion
 from neforward_ros.rostypes import typestore
 
-NODE_TOPIC = "/neforward"
 STORAGES = ("mcap", "sqlite3")
 _NS = 1_000_000_000
 
@@ -404,18 +404,9 @@ def _gap_to_samples(t: np.ndarray, targets: np.ndarray) -> np.ndarray:
 
 
 def output_topics(options: BagOptions) -> list[tuple[str, str]]:
-    """(topic, type) of every output, named as the node's in the root namespace."""
-    out = [
-        (f"{NODE_TOPIC}/link_states", messages.LINK_STATES_TYPE),
-        (f"{NODE_TOPIC}/com_states", messages.LINK_STATES_TYPE),
-    ]
-    for link in options.accel_links:
-        out += [
-            (f"{NODE_TOPIC}/{link}/accel", messages.ACCEL_TYPE),
-            (f"{NODE_TOPIC}/{link}/twist", messages.TWIST_TYPE),
-        ]
-    out += [(f"{NODE_TOPIC}/{link}/imu", messages.IMU_TYPE) for link in options.imu_links]
-    return out
+    """(topic, type) of every output: the node's, resolved in the root namespace."""
+    names = NodeNames()
+    return [(names.resolve(o.topic), o.type) for o in output_list(options.accel_links, options.imu_links, False)]
 
 
 def _write_bag(output: Path, batch: _Batch, options: BagOptions, progress: Callable[[str, float], None]) -> list[str]:
@@ -425,23 +416,15 @@ def _write_bag(output: Path, batch: _Batch, options: BagOptions, progress: Calla
     count = len(batch.log_times)
     first = result.sample(0)
     prefix = options.frame_prefix
+    names = NodeNames()
     rows: dict[str, Any] = {}
     for topic, builder, blocks in (
-        (f"{NODE_TOPIC}/link_states", messages.link_states, messages.link_states_blocks),
-        (f"{NODE_TOPIC}/com_states", messages.com_states, messages.com_states_blocks),
+        (LINK_STATES, messages.link_states, messages.link_states_blocks),
+        (COM_STATES, messages.com_states, messages.com_states_blocks),
     ):
         template = cdr.encode(messages.LINK_STATES_TYPE, builder(first, prefix))
-        rows[topic] = cdr.patch_multi_dof(template, result.stamp_ns, *blocks(result))
-    per_link = []
-    for link in options.accel_links:
-        k = result.link_names.index(link)
-        per_link += [
-            (f"{NODE_TOPIC}/{link}/accel", messages.ACCEL_TYPE, lambda s, k=k: messages.accel_stamped(s, k, prefix)),
-            (f"{NODE_TOPIC}/{link}/twist", messages.TWIST_TYPE, lambda s, k=k: messages.twist_stamped(s, k, prefix)),
-        ]
-    for link in options.imu_links:
-        k = result.link_names.index(link)
-        per_link.append((f"{NODE_TOPIC}/{link}/imu", messages.IMU_TYPE, lambda s, k=k: messages.imu(s, k, prefix)))
+        rows[names.resolve(topic)] = cdr.patch_multi_dof(template, result.stamp_ns, *blocks(result))
+    per_link = bool(options.accel_links or options.imu_links)
     storage = StoragePlugin.MCAP if options.storage == "mcap" else StoragePlugin.SQLITE3
     # Written inside a temporary folder under its final name (rosbag2 names the storage file after
     # the folder), then moved into place: no half-written recording under the output name.
@@ -466,8 +449,9 @@ def _write_bag(output: Path, batch: _Batch, options: BagOptions, progress: Calla
                     writer.write(connection, log_times[i], view[i * size : (i + 1) * size])
                 if per_link:
                     sample = result.sample(i)
-                    for topic, kind, build in per_link:
-                        writer.write(connections[topic], log_times[i], cdr.encode(kind, build(sample)))
+                    for topic, contents in per_link_messages(sample, options.accel_links, options.imu_links, prefix):
+                        connection = connections[names.resolve(topic)]
+                        writer.write(connection, log_times[i], cdr.encode(connection.msgtype, contents))
                 if i % 2048 == 0:
                     progress("writing", i / count)
         progress("writing", 1.0)

@@ -116,7 +116,6 @@ class Pipeline:
         self._log = ThrottledLog(log)
         self.model: RobotModel | None = None
         self._estimator: StreamingEstimator | None = None
-        self._per_link: list[tuple[str, int]] = []  # (kind, link index) of per-link outputs
         for link in (*settings.accel_links, *settings.imu_links):
             if not _TOKEN.match(link):
                 raise ModelError(f"link {link!r} cannot be part of a ROS 2 topic name (letters, digits, _)")
@@ -162,12 +161,6 @@ class Pipeline:
             settings=self.settings.estimator,
             log=self._log_function,
         )
-        self._per_link = [
-            (kind, model.link_index[link])
-            for kind, links in (("accel", self.settings.accel_links), ("imu", self.settings.imu_links))
-            for link in links
-            if link in model.link_index
-        ]
         self._log.log(
             logging.INFO,
             f"model {model.name!r} from the {source}: {len(model.link_names)} links, {len(model.joint_names)} joints, "
@@ -178,30 +171,20 @@ class Pipeline:
 
     def outputs(self) -> list[Output]:
         """Every topic published with these settings (known before the model arrives)."""
-        out = [Output(LINK_STATES, messages.LINK_STATES_TYPE), Output(COM_STATES, messages.LINK_STATES_TYPE)]
-        for link in self.settings.accel_links:
-            out += [Output(f"~/{link}/accel", messages.ACCEL_TYPE), Output(f"~/{link}/twist", messages.TWIST_TYPE)]
-        out += [Output(f"~/{link}/imu", messages.IMU_TYPE) for link in self.settings.imu_links]
-        if self.settings.publish_markers:
-            out.append(Output(MARKERS, messages.MARKERS_TYPE))
-        return out
+        settings = self.settings
+        return output_list(settings.accel_links, settings.imu_links, settings.publish_markers)
 
     def messages(self, result: Result) -> list[tuple[str, dict[str, Any]]]:
         """(topic, message contents) for every output of one result."""
-        prefix = self.settings.frame_prefix
+        settings = self.settings
+        prefix = settings.frame_prefix
         out: list[tuple[str, dict[str, Any]]] = [
             (LINK_STATES, messages.link_states(result, prefix)),
             (COM_STATES, messages.com_states(result, prefix)),
         ]
-        for kind, k in self._per_link:
-            link = result.link_names[k]
-            if kind == "accel":
-                out.append((f"~/{link}/accel", messages.accel_stamped(result, k, prefix)))
-                out.append((f"~/{link}/twist", messages.twist_stamped(result, k, prefix)))
-            else:
-                out.append((f"~/{link}/imu", messages.imu(result, k, prefix)))
-        if self.settings.publish_markers:
-            out.append((MARKERS, messages.markers(result, prefix, self.settings.marker_scale)))
+        out += per_link_messages(result, settings.accel_links, settings.imu_links, prefix)
+        if settings.publish_markers:
+            out.append((MARKERS, messages.markers(result, prefix, settings.marker_scale)))
         return out
 
     # -- input ------------------------------------------------------------------------------
@@ -318,6 +301,36 @@ class Pipeline:
             model, estimate.positions, estimate.velocities, estimate.accelerations, gravity=self.settings.gravity
         )
         return make_result(model, estimate.stamp_ns, in_link, estimate)
+
+
+def output_list(accel_links: Sequence[str], imu_links: Sequence[str], publish_markers: bool) -> list[Output]:
+    """The node's outputs, relative names: link_states, com_states, per-link topics, markers."""
+    out = [Output(LINK_STATES, messages.LINK_STATES_TYPE), Output(COM_STATES, messages.LINK_STATES_TYPE)]
+    for link in accel_links:
+        out += [Output(f"~/{link}/accel", messages.ACCEL_TYPE), Output(f"~/{link}/twist", messages.TWIST_TYPE)]
+    out += [Output(f"~/{link}/imu", messages.IMU_TYPE) for link in imu_links]
+    if publish_markers:
+        out.append(Output(MARKERS, messages.MARKERS_TYPE))
+    return out
+
+
+def per_link_messages(
+    result: Result, accel_links: Sequence[str], imu_links: Sequence[str], frame_prefix: str
+) -> list[tuple[str, dict[str, Any]]]:
+    """(topic, contents) of the per-link outputs of one result, in :func:`output_list` order.
+
+    Links the result's model does not have are left out (the pipeline logs them once).
+    """
+    out: list[tuple[str, dict[str, Any]]] = []
+    for link in accel_links:
+        if link in result.link_names:
+            k = result.link_names.index(link)
+            out.append((f"~/{link}/accel", messages.accel_stamped(result, k, frame_prefix)))
+            out.append((f"~/{link}/twist", messages.twist_stamped(result, k, frame_prefix)))
+    for link in imu_links:
+        if link in result.link_names:
+            out.append((f"~/{link}/imu", messages.imu(result, result.link_names.index(link), frame_prefix)))
+    return out
 
 
 def make_result(model: RobotModel, stamp_ns: Any, in_link: LinkKinematics, joints: Any) -> Result:
