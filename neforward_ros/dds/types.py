@@ -7,7 +7,6 @@ struct is built from the rosbags type store's field definitions on first use.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from functools import cache
 from typing import Any
 
@@ -32,7 +31,6 @@ _BASE = {
     "float32": idl.float32,
     "float64": idl.float64,
 }
-_DEFAULTS = {"bool": False, "float32": 0.0, "float64": 0.0, "string": ""}
 
 
 def dds_type_name(typename: str) -> str:
@@ -74,49 +72,6 @@ def _member_type(nodetype: Any, description: Any) -> Any:
     if kind == 3:
         return idl.array[element, length]
     return idl.sequence[element, length] if length else idl.sequence[element]
-
-
-def to_dds(typename: str, contents: Mapping[str, Any] | None = None) -> IdlStruct:
-    """A DDS sample of ``typename`` from message contents (fields left out take their defaults)."""
-    contents = {} if contents is None else contents
-    _, fields = typestore().fielddefs[typename]
-    unknown = set(contents) - {name for name, _ in fields}
-    if unknown:
-        raise InputError(f"{typename} has no field(s) {', '.join(sorted(unknown))}")
-    values = {name: _value(nodetype, description, contents.get(name)) for name, (nodetype, description) in fields}
-    if not fields:
-        values = {"structure_needs_at_least_one_member": 0}
-    return dds_type(typename)(**values)
-
-
-def _value(nodetype: Any, description: Any, value: Any) -> Any:
-    kind = int(nodetype)
-    if kind == 2:
-        return to_dds(description, value)
-    if kind == 1:
-        base = description[0]
-        if value is None:
-            return _DEFAULTS.get(base, 0)
-        if base == "string":
-            return str(value)
-        if base in ("float32", "float64"):
-            return float(value)
-        return bool(value) if base == "bool" else int(value)
-    (element_type, element_description), length = description
-    if value is None:
-        value = [None] * length if kind == 3 else []
-    return [_value(element_type, element_description, item) for item in value]
-
-
-def from_dds(sample: Any) -> Any:
-    """Message contents (dicts, lists, numbers, strings) of a DDS sample."""
-    if isinstance(sample, IdlStruct):
-        return {name: from_dds(getattr(sample, name)) for name in sample.__dataclass_fields__}
-    if isinstance(sample, (list, tuple)):
-        return [from_dds(item) for item in sample]
-    if isinstance(sample, (bytes, bytearray)):
-        return list(sample)
-    return sample
 
 
 def raw_sample(typename: str, payload: bytes) -> Any:
