@@ -1,17 +1,36 @@
 # Two entry points (see README "Quick start"): `make demo` and `make test`. Each makes the virtual
 # environment .venv with the machine's python3 and installs what it needs into it.
+#
+# Where ROS 2 Jazzy is installed (/opt/ros/jazzy), `make test` also runs the ROS suite (test/ros):
+# the package is built with colcon and run with ros2 run / ros2 launch on ROS 2's own Python
+# (Debian's /usr/bin/python3, as Ubuntu's ROS uses its python3). The package's pip-only
+# dependencies go into .venv-ros, a virtual environment over that Python's packages (the way ROS 2's
+# documentation adds pip packages), with numpy held at the version ROS 2 was built against.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
+ROS_SETUP ?= /opt/ros/jazzy/setup.bash
+ROS_SYSTEM_PYTHON ?= /usr/bin/python3
+ROS_VENV := .venv-ros
+ROS_PIP_PACKAGES := yourdfpy rosbags cyclonedds xacro
+HAVE_ROS := $(wildcard $(ROS_SETUP))
 
 .PHONY: demo test bench clean
 
 demo: $(VENV)/.installed
 	$(BIN)/neforward demo
 
+ifeq ($(HAVE_ROS),)
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check .
+	@echo "make test: no ROS 2 Jazzy at $(ROS_SETUP), so the ROS suite (test/ros) is skipped; install ROS 2 Jazzy to run it"
 	$(BIN)/python -m pytest
+else
+test: $(VENV)/.installed-test $(ROS_VENV)/.installed
+	$(BIN)/ruff check .
+	@echo "make test: ROS 2 Jazzy found at $(ROS_SETUP): the ROS suite (test/ros) runs, on $(ROS_VENV)/bin/python"
+	NEFORWARD_REQUIRE_ROS=1 NEFORWARD_ROS_PYTHON=$(CURDIR)/$(ROS_VENV)/bin/python $(BIN)/python -m pytest
+endif
 
 bench: $(VENV)/.installed-test
 	$(BIN)/python bench/bench_recursion.py
@@ -30,5 +49,13 @@ $(VENV)/.installed-test: $(BIN)/python setup.py setup.cfg package.xml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $@ $(VENV)/.installed
 
+# --without-pip: Debian's ensurepip is a separate package; the system's pip serves the venv.
+$(ROS_VENV)/.installed: Makefile
+	rm -rf $(ROS_VENV)
+	$(ROS_SYSTEM_PYTHON) -m venv --system-site-packages --without-pip $(ROS_VENV)
+	$(ROS_VENV)/bin/python -c 'import numpy; print("numpy==" + numpy.__version__)' > $(ROS_VENV)/constraints.txt
+	$(ROS_VENV)/bin/python -m pip install --quiet -c $(ROS_VENV)/constraints.txt $(ROS_PIP_PACKAGES)
+	touch $@
+
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache .ruff_cache
+	rm -rf $(VENV) $(ROS_VENV) build *.egg-info .pytest_cache .ruff_cache

@@ -17,7 +17,7 @@ setup(
     python_requires=">=3.11",
     install_requires=[
         "setuptools",
-        "numpy>=1.26",
+        "numpy>=1.24",
         "yourdfpy>=0.0.56",
         "pyyaml>=6",
         "rosbags>=0.10",
@@ -25,7 +25,15 @@ setup(
     ],
     extras_require={
         "plot": ["matplotlib>=3.6"],
-        "test": ["pytest>=7", "pin>=3.4", "hypothesis>=6", "scipy>=1.11", "matplotlib>=3.6", "ruff>=0.6"],
+        "test": [
+            "pytest>=7",
+            "pin>=3.4",
+            "hypothesis>=6",
+            "scipy>=1.11",
+            "matplotlib>=3.6",
+            "ruff>=0.6",
+            "catkin_pkg>=1.0",
+        ],
     },
     zip_safe=True,
     maintainer="neforward_ros developers",
@@ -35,6 +43,6 @@ setup(
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={
-        "console_scripts": ["neforward = neforward_ros.cli:main", "neforward_node = neforward_ros.ros_node:main"]
+        "console_scripts": ["neforward = neforward_ros.cli:main", "neforward_node = neforward_ros.node_entry:main"]
     },
 )

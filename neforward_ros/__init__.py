@@ -1,10 +1,31 @@
 """neforward_ros: every link's angular velocity, angular acceleration and linear acceleration from
-joint states and a URDF, by the Newton-Euler forward recursion."""
+joint states and a URDF, by the Newton-Euler forward recursion.
 
-from neforward_ros.derivatives import JointEstimate, StreamingEstimator, StreamSettings, estimate_derivatives
-from neforward_ros.errors import InputError, ModelError, NeforwardError
-from neforward_ros.model import JointKind, ParentJoint, RobotModel, load_model
-from neforward_ros.recursion import DEFAULT_GRAVITY, LinkKinematics, forward_recursion
+The public names below are imported on first use, so that importing a submodule (the command-line
+entry points do) does not import numpy and the whole core first.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+_EXPORTS = {
+    "DEFAULT_GRAVITY": "neforward_ros.recursion",
+    "InputError": "neforward_ros.errors",
+    "JointEstimate": "neforward_ros.derivatives",
+    "JointKind": "neforward_ros.model",
+    "LinkKinematics": "neforward_ros.recursion",
+    "ModelError": "neforward_ros.errors",
+    "NeforwardError": "neforward_ros.errors",
+    "ParentJoint": "neforward_ros.model",
+    "RobotModel": "neforward_ros.model",
+    "StreamSettings": "neforward_ros.derivatives",
+    "StreamingEstimator": "neforward_ros.derivatives",
+    "estimate_derivatives": "neforward_ros.derivatives",
+    "forward_recursion": "neforward_ros.recursion",
+    "load_model": "neforward_ros.model",
+}
 
 __all__ = [
     "DEFAULT_GRAVITY",
@@ -22,3 +43,22 @@ __all__ = [
     "forward_recursion",
     "load_model",
 ]
+
+if TYPE_CHECKING:
+    from neforward_ros.derivatives import JointEstimate, StreamingEstimator, StreamSettings, estimate_derivatives
+    from neforward_ros.errors import InputError, ModelError, NeforwardError
+    from neforward_ros.model import JointKind, ParentJoint, RobotModel, load_model
+    from neforward_ros.recursion import DEFAULT_GRAVITY, LinkKinematics, forward_recursion
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'neforward_ros' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

@@ -25,6 +25,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from neforward_ros.errors import InputError
+
 if TYPE_CHECKING:
     from neforward_ros.pipeline import Result
 
@@ -45,9 +47,18 @@ _ADD = 0  # visualization_msgs/Marker ADD
 _NS = 1_000_000_000
 
 
+_INT32 = range(-(2**31), 2**31)
+
+
 def time(stamp_ns: int) -> Message:
-    """builtin_interfaces/Time from integer nanoseconds."""
+    """builtin_interfaces/Time from integer nanoseconds.
+
+    Raises:
+        InputError: a stamp outside builtin_interfaces/Time's range (int32 seconds).
+    """
     sec, nanosec = divmod(int(stamp_ns), _NS)
+    if sec not in _INT32:
+        raise InputError(f"stamp {stamp_ns} ns is outside the range of builtin_interfaces/Time (int32 seconds)")
     return {"sec": sec, "nanosec": nanosec}
 
 

@@ -154,6 +154,15 @@ def load_model(source: str | os.PathLike[str], *, root_link: str | None = None) 
     return _build_model(robot, root_link)
 
 
+def require_urdf_parser() -> None:
+    """Raise a clear ModelError now, at start-up, when the URDF parser (yourdfpy) is not installed,
+    rather than later from inside a message callback."""
+    import importlib.util
+
+    if importlib.util.find_spec("yourdfpy") is None:
+        raise ModelError("the URDF parser yourdfpy is not installed in this Python: pip install yourdfpy")
+
+
 def _read_source(source: str | os.PathLike[str]) -> bytes:
     if isinstance(source, str) and source.lstrip().startswith("<"):
         return source.encode("utf-8")

@@ -9,7 +9,7 @@ against this table by the tests.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +25,7 @@ from neforward_ros.derivatives import (
 )
 from neforward_ros.errors import InputError
 from neforward_ros.recursion import DEFAULT_GRAVITY
+from neforward_ros.ros_args import RosArgs, parse_ros_args
 
 NODE_NAME = "neforward"
 ACCELERATION_SOURCES = ("estimate", "supplied")
@@ -33,12 +34,13 @@ ACCELERATION_SOURCES = ("estimate", "supplied")
 @dataclass(frozen=True)
 class Parameter:
     """One ROS 2 parameter: name, type (``bool``, ``int``, ``double``, ``string``, ``double[]``,
-    ``string[]``), default and meaning."""
+    ``string[]``), default, meaning, and whether it can change while the node runs."""
 
     name: str
     type: str
     default: Any
     description: str
+    read_only: bool = True
 
 
 PARAMETERS: tuple[Parameter, ...] = (
@@ -46,7 +48,9 @@ PARAMETERS: tuple[Parameter, ...] = (
         "robot_description",
         "string",
         "",
-        "URDF XML of the robot. Empty: the model comes from the robot_description topic (transient local).",
+        "URDF XML of the robot. Empty: the model comes from the robot_description topic (transient local). "
+        "Setting it at run time reloads the model; an invalid URDF is rejected and the previous model kept.",
+        read_only=False,
     ),
     Parameter("root_link", "string", "", "Link whose frame is the root frame. Empty: the URDF's root link."),
     Parameter(
@@ -54,6 +58,7 @@ PARAMETERS: tuple[Parameter, ...] = (
         "double[]",
         list(DEFAULT_GRAVITY),
         "Gravity in the root frame, m/s^2. Accelerations are specific forces (a - g); zeros give kinematic ones.",
+        read_only=False,
     ),
     Parameter(
         "velocity_source",
@@ -77,13 +82,37 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("accel_links", "string[]", [], "Links that get ~/<link>/accel and ~/<link>/twist (link frame)."),
     Parameter("imu_links", "string[]", [], "Links that get a virtual IMU, ~/<link>/imu (sensor_msgs/Imu)."),
     Parameter("publish_markers", "bool", False, "Publish ~/markers: an arrow per link for its COM acceleration."),
-    Parameter("marker_scale", "double", 0.02, "Arrow length per unit of acceleration, m per m/s^2."),
-    Parameter("frame_prefix", "string", "", "Prefix of every frame_id, as robot_state_publisher's frame_prefix."),
+    Parameter("marker_scale", "double", 0.02, "Arrow length per unit of acceleration, m per m/s^2.", read_only=False),
+    Parameter(
+        "frame_prefix",
+        "string",
+        "",
+        "Prefix of every frame_id, as robot_state_publisher's frame_prefix.",
+        read_only=False,
+    ),
     Parameter("qos_depth", "int", 10, "Keep-last depth of the joint_states and joint_states_accel subscriptions."),
 )
-"""Every parameter, in README order. ``use_sim_time`` is ROS 2's own and is not listed."""
+"""Every parameter, in README order. ROS 2's own (``use_sim_time``, ...) and ``qos_overrides.*`` are not listed."""
 
 DEFAULTS: Mapping[str, Any] = {p.name: p.default for p in PARAMETERS}
+
+ROS_OWN_PARAMETERS = ("use_sim_time", "start_type_description_service")
+"""Parameters every ROS 2 Jazzy node declares itself; accepted in files, not ours to interpret."""
+
+QOS_OVERRIDES = "qos_overrides."
+QOS_POLICIES = {"reliability": ("reliable", "best_effort", "system_default"), "history": ("keep_last", "keep_all")}
+QOS_POLICIES_INT = ("depth",)
+QOS_ENTITIES = ("publisher", "subscription")
+
+
+@dataclass(frozen=True)
+class QosOverride:
+    """QoS policies a parameter file sets for one topic's publisher or subscription, ROS 2 style:
+    ``qos_overrides./joint_states.subscription.reliability: best_effort``. None keeps the node's own."""
+
+    reliability: str | None = None
+    history: str | None = None
+    depth: int | None = None
 
 
 @dataclass(frozen=True)
@@ -101,6 +130,7 @@ class NodeSettings:
         marker_scale: m per m/s^2.
         frame_prefix: prepended to every frame_id.
         qos_depth: input keep-last depth.
+        qos_overrides: (fully qualified topic, ``publisher`` or ``subscription``) -> policies.
     """
 
     robot_description: str = ""
@@ -114,6 +144,11 @@ class NodeSettings:
     marker_scale: float = 0.02
     frame_prefix: str = ""
     qos_depth: int = 10
+    qos_overrides: Mapping[tuple[str, str], QosOverride] = field(default_factory=dict)
+
+    def qos_override(self, topic: str, entity: str) -> QosOverride:
+        """The overrides for a fully qualified topic's ``publisher`` or ``subscription``."""
+        return self.qos_overrides.get((topic, entity), QosOverride())
 
 
 def node_settings(values: Mapping[str, Any]) -> NodeSettings:
@@ -123,10 +158,15 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         InputError: an unknown parameter, a value of the wrong type, or an invalid value; the
             message names the parameter.
     """
-    unknown = sorted(set(values) - set(DEFAULTS) - {"use_sim_time"})
+    qos = {name: value for name, value in values.items() if name.startswith(QOS_OVERRIDES)}
+    own = {name: value for name, value in values.items() if name not in qos}
+    unknown = sorted(set(own) - set(DEFAULTS) - set(ROS_OWN_PARAMETERS))
     if unknown:
         raise InputError(f"unknown parameter(s): {', '.join(unknown)}; known: {', '.join(DEFAULTS)}")
-    merged = {**DEFAULTS, **{k: v for k, v in values.items() if v is not None}}
+    for name in ROS_OWN_PARAMETERS:
+        if name in own and not isinstance(own[name], bool):
+            raise InputError(f"parameter {name} must be bool, got {own[name]!r}")
+    merged = {**DEFAULTS, **{k: v for k, v in own.items() if v is not None and k in DEFAULTS}}
     for parameter in PARAMETERS:
         merged[parameter.name] = _check_type(parameter, merged[parameter.name])
 
@@ -167,15 +207,60 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         marker_scale=merged["marker_scale"],
         frame_prefix=merged["frame_prefix"],
         qos_depth=merged["qos_depth"],
+        qos_overrides=_qos_overrides(qos),
     )
 
 
-def load_params_file(path: str | Path, node_name: str = NODE_NAME) -> dict[str, Any]:
-    """Parameter values for ``node_name`` from a ROS 2 params file.
+def _qos_overrides(values: Mapping[str, Any]) -> dict[tuple[str, str], QosOverride]:
+    """``qos_overrides.<topic>.<publisher|subscription>.<policy>`` values, checked, grouped per entity."""
+    grouped: dict[tuple[str, str], dict[str, Any]] = {}
+    for name, value in values.items():
+        parts = name[len(QOS_OVERRIDES) :].rsplit(".", 2)
+        if len(parts) != 3 or not parts[0].startswith("/") or parts[1] not in QOS_ENTITIES:
+            raise InputError(
+                f"parameter {name}: QoS overrides are named qos_overrides.<fully qualified topic>."
+                "<publisher|subscription>.<policy>, e.g. qos_overrides./joint_states.subscription.reliability"
+            )
+        topic, entity, policy = parts
+        if policy in QOS_POLICIES:
+            if value not in QOS_POLICIES[policy]:
+                raise InputError(f"parameter {name} must be one of {', '.join(QOS_POLICIES[policy])}, got {value!r}")
+        elif policy in QOS_POLICIES_INT:
+            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                raise InputError(f"parameter {name} must be a positive integer, got {value!r}")
+        else:
+            known = ", ".join([*QOS_POLICIES, *QOS_POLICIES_INT])
+            raise InputError(f"parameter {name}: this node lets a file override {known}, not {policy}")
+        grouped.setdefault((topic, entity), {})[policy] = value
+    return {key: QosOverride(**policies) for key, policies in grouped.items()}
 
-    The file maps node names (``neforward``, ``/neforward``, a namespaced ``/ns/neforward`` or the
-    wildcard ``/**``) to ``ros__parameters``; nested mappings give dotted names
-    (``estimator: {window: 0.2}`` is ``estimator.window``). Entries for other nodes are ignored.
+
+def node_name_matches(key: str, fully_qualified_name: str) -> bool:
+    """Whether a params-file key names this node, by rcl's rules.
+
+    A key without a leading ``/`` is taken from the root (``neforward`` is ``/neforward``, which a
+    node in namespace ``/robot1`` does not match); ``*`` matches one name token and ``**`` any number,
+    so ``/**`` matches every node and ``/**/neforward`` a node called neforward in any namespace.
+    """
+    pattern = [t for t in key.strip().strip("/").split("/") if t]
+    name = [t for t in fully_qualified_name.strip("/").split("/") if t]
+
+    def match(p: int, n: int) -> bool:
+        if p == len(pattern):
+            return n == len(name)
+        if pattern[p] == "**":
+            return any(match(p + 1, m) for m in range(n, len(name) + 1))
+        return n < len(name) and pattern[p] in ("*", name[n]) and match(p + 1, n + 1)
+
+    return match(0, 0)
+
+
+def load_params_file(path: str | Path, node_name: str = NODE_NAME, namespace: str = "/") -> dict[str, Any]:
+    """Parameter values for a node from a ROS 2 params file.
+
+    The file maps node names to ``ros__parameters``; the entries that name this node by rcl's rules
+    (see :func:`node_name_matches`) apply, in file order. Nested mappings give dotted names
+    (``estimator: {window: 0.2}`` is ``estimator.window``).
 
     Raises:
         InputError: the file is missing or is not such YAML.
@@ -188,15 +273,36 @@ def load_params_file(path: str | Path, node_name: str = NODE_NAME) -> dict[str, 
         raise InputError(f"cannot read params file {path}: {exc}") from exc
     if not isinstance(document, dict):
         raise InputError(f"params file {path} is not a mapping of node names to ros__parameters")
+    fully_qualified = namespace.rstrip("/") + "/" + node_name
     values: dict[str, Any] = {}
     for key, entry in document.items():
-        name = str(key).rstrip("/")
-        if name not in ("/**", node_name, f"/{node_name}") and not name.endswith(f"/{node_name}"):
+        if not node_name_matches(str(key), fully_qualified):
             continue
         if not isinstance(entry, dict) or not isinstance(entry.get("ros__parameters"), dict):
             raise InputError(f"params file {path}: {key} has no ros__parameters mapping")
         values.update(_flatten(entry["ros__parameters"]))
     return values
+
+
+def command_line_parameters(
+    tokens: Sequence[str], *, strict: bool = True, params_file: str | None = None
+) -> tuple[RosArgs, dict[str, Any]]:
+    """The ``--ros-args`` section of a node command line and the parameter values it gives.
+
+    Values come from the params files in order (``params_file`` first when given), then ``-p``
+    rules. Both runtimes call this, so a file or value is accepted or rejected alike by both.
+
+    Raises:
+        InputError: a malformed section or an unreadable params file.
+    """
+    parsed = parse_ros_args(tokens, NODE_NAME, strict=strict)
+    node_name = parsed.node_name or NODE_NAME
+    namespace = parsed.namespace or "/"
+    values: dict[str, Any] = {}
+    for path in [*([params_file] if params_file else []), *parsed.params_files]:
+        values.update(load_params_file(path, node_name, namespace))
+    values.update(parsed.params)
+    return parsed, values
 
 
 def _flatten(mapping: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -221,9 +327,11 @@ def _check_type(parameter: Parameter, value: Any) -> Any:
             raise InputError(problem)
         return value
     if kind == "double":
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if isinstance(value, int) and not isinstance(value, bool):
+            raise InputError(_whole_number(parameter.name, value))
+        if not isinstance(value, float) or not math.isfinite(value):
             raise InputError(problem)
-        return float(value)
+        return value
     if kind == "string":
         if not isinstance(value, str):
             raise InputError(problem)
@@ -231,9 +339,19 @@ def _check_type(parameter: Parameter, value: Any) -> Any:
     if not isinstance(value, (list, tuple)):
         raise InputError(problem)
     if kind == "double[]":
-        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
+        whole = [v for v in value if isinstance(v, int) and not isinstance(v, bool)]
+        if whole:
+            raise InputError(_whole_number(parameter.name, whole[0]))
+        if not all(isinstance(v, float) and math.isfinite(v) for v in value):
             raise InputError(problem)
-        return [float(v) for v in value]
+        return list(value)
     if not all(isinstance(v, str) for v in value):  # string[]
         raise InputError(problem)
     return list(value)
+
+
+def _whole_number(name: str, value: int) -> str:
+    return (
+        f"parameter {name} must be double, got the integer {value}: "
+        f"ROS 2 reads a number without a decimal point as an integer; write {value}.0"
+    )

@@ -135,7 +135,7 @@ class Pipeline:
         model kept. Returns whether the model was replaced."""
         try:
             model = load_model(urdf, root_link=self.settings.root_link)
-        except ModelError as exc:
+        except Exception as exc:  # ModelError, or a URDF parser that cannot be imported
             kept = "keeping the previous model" if self.model is not None else "still waiting for a valid one"
             self._log.log(logging.ERROR, f"invalid robot description from the {source}: {exc}; {kept}")
             return False
@@ -165,6 +165,16 @@ class Pipeline:
             logging.INFO,
             f"model {model.name!r} from the {source}: {len(model.link_names)} links, {len(model.joint_names)} joints, "
             f"root {model.root_link!r}",
+        )
+
+    def update_settings(self, settings: NodeSettings) -> None:
+        """Use new values of the settings that may change at run time (gravity, frame_prefix,
+        marker_scale); the model and the estimator's histories are kept."""
+        self.settings = replace(
+            self.settings,
+            gravity=settings.gravity,
+            frame_prefix=settings.frame_prefix,
+            marker_scale=settings.marker_scale,
         )
 
     # -- topics -----------------------------------------------------------------------------

@@ -1,37 +1,42 @@
 """The rclpy adapter: ``ros2 run neforward_ros neforward_node`` (node name ``neforward``).
 
-Thin by design: it declares the parameters of :mod:`neforward_ros.parameters`, subscribes, hands the
-fields of each message to :class:`neforward_ros.pipeline.Pipeline` and publishes what it returns.
-The only module that imports rclpy.
+Thin by design: it declares the parameters of :mod:`neforward_ros.parameters`, subscribes with raw
+(serialized) subscriptions, hands the bytes to :class:`neforward_ros.handlers.MessageHandlers`, and
+publishes the serialized messages it gets back, exactly as the no-ROS DDS node does. The only
+module that imports rclpy.
 """
 
 from __future__ import annotations
 
 import logging
+import signal
 import sys
-from functools import cache
 from typing import Any
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_policy_name_from_kind
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from rosidl_runtime_py.utilities import get_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from trajectory_msgs.msg import JointTrajectory
 
-from neforward_ros import messages
-from neforward_ros.parameters import NODE_NAME, PARAMETERS, node_settings
-from neforward_ros.pipeline import (
-    JOINT_STATES,
-    JOINT_STATES_ACCEL,
-    ROBOT_DESCRIPTION,
-    Pipeline,
-    Result,
-    TrajectoryPoint,
+from neforward_ros.errors import NeforwardError
+from neforward_ros.handlers import MessageHandlers
+from neforward_ros.model import load_model, require_urdf_parser
+from neforward_ros.parameters import (
+    DEFAULTS,
+    NODE_NAME,
+    PARAMETERS,
+    command_line_parameters,
+    node_settings,
 )
+from neforward_ros.pipeline import JOINT_STATES, JOINT_STATES_ACCEL, ROBOT_DESCRIPTION, Pipeline
+from neforward_ros.ros_args import ros_args_section
 
 OUTPUT_QOS_DEPTH = 10
 
@@ -48,25 +53,62 @@ class NeforwardNode(Node):
         for parameter in PARAMETERS:
             # An empty list default would be typed BYTE_ARRAY by rclpy; dynamic typing lets a
             # params file give the string list (rclpy issue 912).
-            descriptor = ParameterDescriptor(description=parameter.description, dynamic_typing=parameter.default == [])
+            descriptor = ParameterDescriptor(
+                description=parameter.description,
+                read_only=parameter.read_only,
+                dynamic_typing=parameter.default == [],
+            )
             self.declare_parameter(parameter.name, parameter.default, descriptor)
-        values = {p.name: _plain(self.get_parameter(p.name).value) for p in PARAMETERS}
-        self.settings = node_settings(values)
+        self.settings = node_settings(self._values())
         self.pipeline = Pipeline(self.settings, log=self._log_to_ros)
+        overridable = QoSOverridingOptions.with_default_policies()
         self._output_publishers = {
-            output.topic: self.create_publisher(get_message(output.type), output.topic, OUTPUT_QOS_DEPTH)
+            output.topic: self.create_publisher(
+                get_message(output.type), output.topic, OUTPUT_QOS_DEPTH, qos_overriding_options=overridable
+            )
             for output in self.pipeline.outputs()
         }
+        self.handlers = MessageHandlers(self.pipeline, self._publish, log=self._log_to_ros)
         input_qos = QoSProfile(depth=self.settings.qos_depth)
         if self.settings.acceleration_source == "supplied":
-            self.create_subscription(JointTrajectory, JOINT_STATES_ACCEL, self._on_joint_trajectory, input_qos)
+            self._raw_subscription(JointTrajectory, JOINT_STATES_ACCEL, self.handlers.on_joint_trajectory, input_qos)
         else:
-            self.create_subscription(JointState, JOINT_STATES, self._on_joint_state, input_qos)
+            self._raw_subscription(JointState, JOINT_STATES, self.handlers.on_joint_state, input_qos)
         if not self.settings.robot_description:
             latched = QoSProfile(
                 depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE
             )
-            self.create_subscription(String, ROBOT_DESCRIPTION, self._on_description, latched)
+            self.create_subscription(String, ROBOT_DESCRIPTION, self.handlers.on_description, latched, raw=True)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+    def _values(self) -> dict[str, Any]:
+        return {p.name: _plain(self.get_parameter(p.name).value) for p in PARAMETERS}
+
+    def _raw_subscription(self, message_type: type, topic: str, handler: Any, qos: QoSProfile) -> None:
+        def callback(data: bytes) -> None:
+            handler(data, self.get_clock().now().nanoseconds)  # sim time when use_sim_time is set
+
+        def incompatible(event: Any) -> None:
+            policy = qos_policy_name_from_kind(event.last_policy_kind)
+            self._log_to_ros(
+                logging.WARNING,
+                f"a publisher on {self.resolve_topic_name(topic)} offers QoS incompatible with this subscription "
+                f"({policy}): its messages are not received. For a best-effort publisher, set the parameter "
+                f"qos_overrides.{self.resolve_topic_name(topic)}.subscription.reliability: best_effort",
+            )
+
+        self.create_subscription(
+            message_type,
+            topic,
+            callback,
+            qos,
+            raw=True,
+            qos_overriding_options=QoSOverridingOptions.with_default_policies(),
+            event_callbacks=SubscriptionEventCallbacks(incompatible_qos=incompatible),
+        )
+
+    def _publish(self, topic: str, payload: bytes) -> None:
+        self._output_publishers[topic].publish(payload)
 
     def _log_to_ros(self, level: int, message: str) -> None:
         logger = self.get_logger()
@@ -79,61 +121,22 @@ class NeforwardNode(Node):
         else:
             logger.debug(message)
 
-    def _now_ns(self) -> int:
-        return self.get_clock().now().nanoseconds  # sim time when use_sim_time is set
-
-    def _on_description(self, message: String) -> None:
-        self.pipeline.set_description(message.data)
-
-    def _on_joint_state(self, message: JointState) -> None:
-        results = self.pipeline.on_joint_state(
-            messages.stamp_ns(message.header.stamp),
-            list(message.name),
-            list(message.position),
-            list(message.velocity),
-            receive_ns=self._now_ns(),
-        )
-        self._publish_results(results)
-
-    def _on_joint_trajectory(self, message: JointTrajectory) -> None:
-        points = [
-            TrajectoryPoint(
-                list(p.positions), list(p.velocities), list(p.accelerations), messages.stamp_ns(p.time_from_start)
-            )
-            for p in message.points
-        ]
-        stamp = messages.stamp_ns(message.header.stamp)
-        self._publish_results(
-            self.pipeline.on_joint_trajectory(stamp, list(message.joint_names), points, receive_ns=self._now_ns())
-        )
-
-    def _publish_results(self, results: list[Result]) -> None:
-        for result in results:
-            for topic, contents in self.pipeline.messages(result):
-                publisher = self._output_publishers[topic]
-                publisher.publish(to_message(publisher.msg_type, contents))
-
-
-def to_message(message_type: type, contents: dict[str, Any]) -> Any:
-    """An rclpy message of ``message_type`` from the contents built by :mod:`neforward_ros.messages`."""
-    message = message_type()
-    for name, value in contents.items():
-        if isinstance(value, dict):
-            value = to_message(type(getattr(message, name)), value)
-        elif isinstance(value, list) and value and isinstance(value[0], dict):
-            element_type = _element_type(message_type, name)
-            value = [to_message(element_type, item) for item in value]
-        setattr(message, name, value)
-    return message
-
-
-@cache
-def _element_type(message_type: type, field: str) -> type:
-    """Message class of the elements of a sequence field, e.g. ``sequence<geometry_msgs/Transform>``."""
-    spec = message_type.get_fields_and_field_types()[field]
-    inner = spec.split("<", 1)[1].split(",")[0].rstrip(">") if "<" in spec else spec.split("[")[0]
-    package, name = inner.split("/")
-    return get_message(f"{package}/msg/{name}")
+    def _on_set_parameters(self, parameters: list[rclpy.parameter.Parameter]) -> SetParametersResult:
+        """Run-time changes (rclpy has already refused the read-only ones): check, then apply."""
+        changed = {p.name: _plain(p.value) for p in parameters if p.name in DEFAULTS}
+        if not changed:
+            return SetParametersResult(successful=True)
+        try:
+            settings = node_settings({**self._values(), **changed})
+            text = changed.get("robot_description")
+            if text is not None:
+                if not text:
+                    raise NeforwardError("robot_description cannot be emptied while the node runs")
+                self.pipeline.set_model(load_model(text, root_link=settings.root_link), "robot_description parameter")
+        except NeforwardError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.pipeline.update_settings(settings)
+        return SetParametersResult(successful=True)
 
 
 def _plain(value: Any) -> Any:
@@ -143,12 +146,32 @@ def _plain(value: Any) -> Any:
     return list(value)
 
 
+def _interrupt_once(signum: int, frame: Any) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    raise KeyboardInterrupt
+
+
 def main(args: list[str] | None = None) -> int:
-    rclpy.init(args=args)
+    argv = sys.argv if args is None else args
+    try:
+        # The checks `neforward run` makes, before rcl reads the same arguments: the same files and
+        # values are accepted or refused by both runtimes, with the same one-line message.
+        require_urdf_parser()
+        node_settings(command_line_parameters(ros_args_section(argv), strict=False)[1])
+    except NeforwardError as exc:
+        print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
+        return 1
+    # Ctrl-C raises KeyboardInterrupt once; later ones (a terminal signals the whole process group,
+    # and ros2 launch forwards one more) are ignored so that the shutdown completes. rclpy's own
+    # handler, installed by init, wakes the executor and then calls this one.
+    signal.signal(signal.SIGINT, _interrupt_once)
     node = None
     try:
         try:
+            rclpy.init(args=argv)
             node = NeforwardNode()
+        except (KeyboardInterrupt, ExternalShutdownException):
+            raise
         except Exception as exc:
             print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
             return 1
@@ -156,6 +179,7 @@ def main(args: list[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,58 @@ TEST_ROBOTS = {
     "humanoid": URDF_DIR / "humanoid.urdf",
     "panda": CONFIG_DIR / "panda.urdf",
 }
+
+
+OPTIONAL = {
+    "cyclonedds": "pip install cyclonedds (the no-ROS runtime)",
+    "rosbags": "pip install rosbags (ROS 2 message types without ROS)",
+    "hypothesis": "pip install hypothesis (a test extra)",
+    "scipy": "pip install scipy (a test extra)",
+    "pinocchio": "pip install pin (Pinocchio, the test oracle; a test extra)",
+    "catkin_pkg": "pip install catkin_pkg (a test extra)",
+}
+
+
+# What each test module needs beyond the package's core (numpy, yourdfpy, PyYAML).
+REQUIREMENTS = {
+    "test_bag.py": ("rosbags", "pinocchio"),
+    "test_cdr.py": ("hypothesis", "rosbags"),
+    "test_dds_node.py": ("cyclonedds", "rosbags"),
+    "test_derivatives_stream.py": ("hypothesis",),
+    "test_pipeline_messages.py": ("scipy", "rosbags", "pinocchio"),
+    "test_recursion_pinocchio.py": ("pinocchio",),
+}
+
+
+def missing(*modules: str) -> list[str]:
+    return [module for module in modules if importlib.util.find_spec(module) is None]
+
+
+def require(*modules: str) -> None:
+    """Skip the calling test, saying why, when one of these is not installed."""
+    for module in missing(*modules):
+        pytest.skip(f"{module} is not installed: {OPTIONAL[module]}")
+
+
+class _Unavailable(pytest.File):
+    """A test module whose requirements are missing: reported as skipped, with the reason, and never
+    imported. (ROS 2's launch_testing pytest plugin imports every module while collecting, and a
+    module-level skip raised there would abort the collection of the whole folder under colcon test.)"""
+
+    reason = ""
+
+    def collect(self):
+        pytest.skip(self.reason)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_pycollect_makemodule(module_path, parent):
+    absent = missing(*REQUIREMENTS.get(module_path.name, ()))
+    if not absent:
+        return None
+    node = _Unavailable.from_parent(parent, path=module_path)
+    node.reason = "; ".join(f"{module} is not installed: {OPTIONAL[module]}" for module in absent)
+    return node
 
 
 def assert_close(actual: np.ndarray, expected: np.ndarray, rel: float, what: str = "") -> None:

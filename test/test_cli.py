@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import math
+import os
+import subprocess
+import sys
+
+import pytest
 
 from neforward_ros.cli import bundled_config_path, main
 
-from conftest import TEST_ROBOTS
+from conftest import CONFIG_DIR, TEST_ROBOTS, require
 
 
 def test_demo_prints_every_link_of_the_bundled_robot(capsys) -> None:
@@ -35,3 +40,39 @@ def test_demo_errors_exit_non_zero_with_one_line(capsys) -> None:
 
 def test_bundled_robot_is_found() -> None:
     assert bundled_config_path("panda.urdf").is_file()
+
+
+def test_neforward_node_without_ros_says_so_in_one_line() -> None:
+    """The pip-installed entry point started where ROS 2 is not sourced (no rclpy on the path)."""
+    environment = {k: v for k, v in os.environ.items() if not k.startswith(("ROS_", "AMENT_", "COLCON_"))}
+    environment["PYTHONPATH"] = str(CONFIG_DIR.parent)  # the package's source, and nothing of ROS
+    probe = subprocess.run([sys.executable, "-c", "import rclpy"], env=environment, capture_output=True, check=False)
+    if probe.returncode == 0:
+        pytest.skip("rclpy is importable here even without ROS 2 sourced")
+    done = subprocess.run(
+        [sys.executable, "-m", "neforward_ros.node_entry", "--ros-args", "-p", "max_gap:=1.0"],
+        env=environment, capture_output=True, text=True, timeout=60, check=False,
+    )  # fmt: skip
+    assert done.returncode == 1
+    assert done.stderr.count("\n") == 1 and "ROS 2 is not sourced" in done.stderr, done.stderr
+    assert "source /opt/ros/jazzy/setup.bash" in done.stderr and "neforward run" in done.stderr
+
+
+def test_package_xml_is_a_valid_ros_package_manifest() -> None:
+    """catkin_pkg (what colcon uses to recognise a ROS package) parses it; an invalid manifest makes
+    colcon build a plain Python package that `ros2 run` cannot find."""
+    require("catkin_pkg")
+    from catkin_pkg.package import parse_package
+
+    package = parse_package(str(CONFIG_DIR.parent / "package.xml"))
+    assert package.name == "neforward_ros" and package.get_build_type() == "ament_python"
+    depends = {d.name for d in package.exec_depends}
+    assert {"rclpy", "sensor_msgs", "trajectory_msgs", "geometry_msgs", "visualization_msgs"} <= depends
+
+
+def test_the_public_api_is_importable_by_name() -> None:
+    import neforward_ros
+
+    for name in neforward_ros.__all__:
+        assert getattr(neforward_ros, name) is not None, name
+    assert sorted(neforward_ros.__all__) == sorted(neforward_ros._EXPORTS)

@@ -8,7 +8,14 @@ import re
 import pytest
 
 from neforward_ros import InputError
-from neforward_ros.parameters import DEFAULTS, PARAMETERS, load_params_file, node_settings
+from neforward_ros.parameters import (
+    DEFAULTS,
+    PARAMETERS,
+    QosOverride,
+    load_params_file,
+    node_name_matches,
+    node_settings,
+)
 
 from conftest import CONFIG_DIR, TEST_DIR
 
@@ -47,10 +54,37 @@ def test_params_file_forms(tmp_path) -> None:
         "other_node:\n  ros__parameters:\n    max_gap: 9.0\n"
         "/robot1/neforward:\n  ros__parameters:\n    estimator:\n      window: 0.3\n    accel_links: [a, b]\n"
     )
-    values = load_params_file(path)
+    assert load_params_file(path) == {"max_gap": 1.0}  # /robot1/neforward is another node than /neforward
+    values = load_params_file(path, namespace="/robot1")
     assert values == {"max_gap": 1.0, "estimator.window": 0.3, "accel_links": ["a", "b"]}
     settings = node_settings(values)
     assert settings.estimator.window == 0.3 and settings.accel_links == ("a", "b")
+
+
+# What rcl (ROS 2 Jazzy) did with each params-file key for a node /robot1/neforward, tried with
+# `ros2 run ... -r __ns:=/robot1 --params-file` and `ros2 param get`: the oracle for our matcher.
+RCL_MATCHES = {
+    "/**": True,
+    "/*/neforward": True,
+    "robot1/neforward": True,
+    "/robot1/*": True,
+    "/**/neforward": True,
+    "/**/robot1/neforward": True,
+    "neforward": False,
+    "/neforward": False,
+    "/*/*/neforward": False,
+    "/robot2/neforward": False,
+}
+
+
+@pytest.mark.parametrize("key", sorted(RCL_MATCHES))
+def test_params_file_keys_match_nodes_as_rcl_does(key: str) -> None:
+    assert node_name_matches(key, "/robot1/neforward") is RCL_MATCHES[key]
+
+
+def test_bundled_params_file_applies_in_any_namespace() -> None:
+    for namespace in ("/", "/robot1", "/fleet/robot7"):
+        assert load_params_file(CONFIG_DIR / "neforward.yaml", namespace=namespace)["max_gap"] == 0.5
 
 
 @pytest.mark.parametrize(
@@ -58,6 +92,12 @@ def test_params_file_forms(tmp_path) -> None:
     [
         ({"max_gapp": 1.0}, "unknown parameter\\(s\\): max_gapp"),
         ({"max_gap": "1"}, "max_gap must be double"),
+        ({"max_gap": 1}, "max_gap must be double, got the integer 1: .* write 1.0"),
+        ({"gravity": [0, 0, -9.81]}, "gravity must be double, got the integer 0"),
+        ({"qos_overrides./joint_states.subscription.reliability": "sometimes"}, "must be one of reliable"),
+        ({"qos_overrides./joint_states.subscription.deadline": 1.0}, "not deadline"),
+        ({"qos_overrides.joint_states.reliability": "reliable"}, "QoS overrides are named"),
+        ({"use_sim_time": "yes"}, "use_sim_time must be bool"),
         ({"gravity": [0.0, -9.81]}, "gravity must have 3 components"),
         ({"velocity_source": "psychic"}, "velocity_source must be one of auto, message, differentiate"),
         ({"acceleration_source": "x"}, "acceleration_source must be one of estimate, supplied"),
@@ -79,3 +119,18 @@ def test_unreadable_params_file(tmp_path) -> None:
     (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
     with pytest.raises(InputError, match="not a mapping"):
         load_params_file(tmp_path / "list.yaml")
+
+
+def test_qos_overrides_and_ros_own_parameters_are_accepted() -> None:
+    settings = node_settings(
+        {
+            "use_sim_time": True,
+            "start_type_description_service": False,
+            "qos_overrides./joint_states.subscription.reliability": "best_effort",
+            "qos_overrides./joint_states.subscription.depth": 100,
+            "qos_overrides./neforward/link_states.publisher.history": "keep_all",
+        }
+    )
+    assert settings.qos_override("/joint_states", "subscription") == QosOverride(reliability="best_effort", depth=100)
+    assert settings.qos_override("/neforward/link_states", "publisher") == QosOverride(history="keep_all")
+    assert settings.qos_override("/joint_states", "publisher") == QosOverride()

@@ -18,10 +18,10 @@ import yaml
 from neforward_ros import messages
 from neforward_ros.dds.names import NodeNames
 from neforward_ros.dds.qos import default_qos, latched_qos
-from neforward_ros.dds.ros_args import parse_ros_args
 from neforward_ros.dds.types import RawBytes, raw_reader
 from neforward_ros.errors import InputError
-from neforward_ros.parameters import NODE_NAME, load_params_file, node_settings
+from neforward_ros.model import require_urdf_parser
+from neforward_ros.parameters import NODE_NAME, command_line_parameters, node_settings
 from neforward_ros.rostypes import deserialize
 
 _LEVELS = {"DEBUG": logging.DEBUG, "INFO": logging.INFO, "WARN": logging.WARNING, "WARNING": logging.WARNING}
@@ -40,23 +40,28 @@ def domain_id() -> int:
 
 def run_node(urdf: str | None, params_file: str | None, ros_args: Sequence[str]) -> int:
     """``neforward run``: the node until Ctrl-C or SIGTERM. Start-up errors raise NeforwardError."""
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: Any) -> None:
+        # Stop once, whenever it comes (during start-up too); a second Ctrl-C (a terminal signals
+        # the whole process group, ros2 launch forwards one more) must not break the shutdown.
+        stop.set()
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
     from neforward_ros.dds.runtime import DdsNode  # imports cyclonedds
 
-    parsed = parse_ros_args(ros_args, NODE_NAME)
+    require_urdf_parser()
+    parsed, values = command_line_parameters(ros_args, params_file=params_file)
     node_name = parsed.node_name or NODE_NAME
-    values: dict[str, Any] = {}
-    for path in [*([params_file] if params_file else []), *parsed.params_files]:
-        values.update(load_params_file(path, node_name))
-    values.update(parsed.params)
     if urdf is not None:
         try:
             values["robot_description"] = Path(urdf).read_text()
         except OSError as exc:
             raise InputError(f"cannot read --urdf {urdf}: {exc.strerror or exc}") from exc
-    use_sim_time = values.pop("use_sim_time", False)
-    if not isinstance(use_sim_time, bool):
-        raise InputError(f"parameter use_sim_time must be bool, got {use_sim_time!r}")
     settings = node_settings(values)
+    use_sim_time = bool(values.get("use_sim_time", False))
     names = NodeNames(node_name, parsed.namespace or "/", parsed.remaps)
     logging.basicConfig(
         level=_LEVELS.get(parsed.log_level or "INFO", logging.INFO),
@@ -71,12 +76,7 @@ def run_node(urdf: str | None, params_file: str | None, ros_args: Sequence[str])
     # Everything allocated so far lives as long as the node: keep it out of the collector's full
     # passes, which otherwise walk it every few hundred messages and show up as latency spikes.
     gc.freeze()
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    try:
-        node.spin(stop)
-    except KeyboardInterrupt:
-        pass
+    node.spin(stop)
     log(logging.INFO, f"stopped: {node.messages_in} messages in, {node.messages_out} results out")
     return 0
 

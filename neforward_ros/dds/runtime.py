@@ -1,8 +1,8 @@
 """The neforward node over Cyclone DDS: same pipeline, topics, types, QoS and parameters as the rclpy node.
 
-Thin, like the rclpy adapter: readers in, :class:`neforward_ros.pipeline.Pipeline` in the middle,
-writers out. Messages are encoded by :mod:`neforward_ros.cdr` from the contents that
-:mod:`neforward_ros.messages` builds, so the bytes equal what an rclpy node would send.
+Thin, like the rclpy adapter: raw readers hand CDR bytes to
+:class:`neforward_ros.handlers.MessageHandlers`, which gives back CDR bytes for raw writers. The
+handling of every message is the rclpy node's, line for line, since it is the same code.
 """
 
 from __future__ import annotations
@@ -13,22 +13,22 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+from cyclonedds.core import InstanceState, Listener, ReadCondition, SampleState, ViewState, WaitSet
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.qos import Policy, Qos
-from cyclonedds.sub import DataReader, InvalidSample
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from neforward_ros import cdr, messages
+from neforward_ros import messages
 from neforward_ros.dds.graph import GraphAnnouncer
 from neforward_ros.dds.names import NodeNames
 from neforward_ros.dds.qos import default_qos, latched_qos, participant_qos
-from neforward_ros.dds.types import dds_type, raw_sample
+from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
+from neforward_ros.handlers import MessageHandlers, decode_clock_ns
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.parameters import NodeSettings
-from neforward_ros.pipeline import JOINT_STATES, JOINT_STATES_ACCEL, ROBOT_DESCRIPTION, Pipeline, TrajectoryPoint
+from neforward_ros.pipeline import JOINT_STATES, JOINT_STATES_ACCEL, ROBOT_DESCRIPTION, Pipeline
 
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -62,39 +62,44 @@ class DdsNode:
         self._log = ThrottledLog(log)
         self.pipeline = Pipeline(settings, log=log)
         self.participant = DomainParticipant(domain_id, qos=participant_qos())
-        self.messages_in = 0
-        self.messages_out = 0
         self._writers: dict[str, tuple[str, DataWriter]] = {}
         for output in self.pipeline.outputs():
+            override = settings.qos_override(self.names.resolve(output.topic), "publisher")
             self._writers[output.topic] = (
                 output.type,
-                self._writer(output.topic, output.type, default_qos(output.type)),
+                self._writer(output.topic, output.type, default_qos(output.type, override=override)),
             )
-        self._handlers: list[tuple[DataReader, Callable[[Any], None]]] = []
-        depth = settings.qos_depth
+        self.handlers = MessageHandlers(self.pipeline, self._publish, log=log)
+        self._readers: list[tuple[Any, Callable[[bytes], None]]] = []
         if settings.acceleration_source == "supplied":
-            trajectory = messages.JOINT_TRAJECTORY_TYPE
-            self._reader(JOINT_STATES_ACCEL, trajectory, default_qos(trajectory, depth), self._on_joint_trajectory)
+            self._input(JOINT_STATES_ACCEL, messages.JOINT_TRAJECTORY_TYPE, self.handlers.on_joint_trajectory)
         else:
-            joint_state = messages.JOINT_STATE_TYPE
-            self._reader(JOINT_STATES, joint_state, default_qos(joint_state, depth), self._on_joint_state)
+            self._input(JOINT_STATES, messages.JOINT_STATE_TYPE, self.handlers.on_joint_state)
         if not settings.robot_description:
             string = messages.STRING_TYPE
-            self._reader(ROBOT_DESCRIPTION, string, latched_qos(string), self._on_description)
+            self._reader(ROBOT_DESCRIPTION, string, latched_qos(string), self.handlers.on_description)
         self._sim_time_ns: int | None = None
         if use_sim_time:
             best_effort = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1))
             self._reader("/clock", CLOCK_TYPE, best_effort, self._on_clock)
         self._waitset = WaitSet(self.participant)
-        for reader, _ in self._handlers:
+        for reader, _ in self._readers:
             self._waitset.attach(ReadCondition(reader, _ANY))
         self._graph = GraphAnnouncer(self.participant)
         self._graph.announce(
             self.names.namespace,
             self.names.node_name,
-            [reader for reader, _ in self._handlers],
+            [reader for reader, _ in self._readers],
             [writer for _, writer in self._writers.values()],
         )
+
+    @property
+    def messages_in(self) -> int:
+        return self.handlers.messages_in
+
+    @property
+    def messages_out(self) -> int:
+        return self.handlers.results_out
 
     # -- entities ---------------------------------------------------------------------------
 
@@ -102,9 +107,33 @@ class DdsNode:
         topic = Topic(self.participant, self.names.dds_topic(name), dds_type(typename))
         return DataWriter(self.participant, topic, qos=qos)
 
-    def _reader(self, name: str, typename: str, qos: Qos, handler: Callable[[Any], None]) -> None:
-        topic = Topic(self.participant, self.names.dds_topic(name), dds_type(typename))
-        self._handlers.append((DataReader(self.participant, topic, qos=qos), handler))
+    def _input(self, name: str, typename: str, handler: Callable[[bytes, int], None]) -> None:
+        """An input topic: ROS 2 default QoS with ``qos_depth``, then the ``qos_overrides``."""
+        settings = self.pipeline.settings
+        override = settings.qos_override(self.names.resolve(name), "subscription")
+        self._reader(
+            name,
+            typename,
+            default_qos(typename, settings.qos_depth, override),
+            lambda data: handler(data, self._receive_ns()),
+            listener=Listener(on_requested_incompatible_qos=lambda reader, status: self._incompatible(name, status)),
+        )
+
+    def _reader(
+        self, name: str, typename: str, qos: Qos, handler: Callable[[bytes], None], listener: Any = None
+    ) -> None:
+        reader = raw_reader(self.participant, self.names.dds_topic(name), typename, qos, listener)
+        self._readers.append((reader, handler))
+
+    def _incompatible(self, name: str, status: Any) -> None:
+        topic = self.names.resolve(name)
+        self._log.every(
+            ("incompatible", name),
+            logging.WARNING,
+            f"a publisher on {topic} offers QoS incompatible with this subscription (policy id "
+            f"{status.last_policy_id}): its messages are not received. For a best-effort publisher, set the "
+            f"parameter qos_overrides.{topic}.subscription.reliability: best_effort",
+        )
 
     # -- loop -------------------------------------------------------------------------------
 
@@ -112,16 +141,12 @@ class DdsNode:
         """Wait up to ``timeout_s`` for input, handle all of it; returns the number of samples."""
         self._waitset.wait(duration(seconds=timeout_s))
         count = 0
-        for reader, handler in self._handlers:
+        for reader, handler in self._readers:
             while True:
                 samples = reader.take(N=_BATCH)
                 for sample in samples:
-                    if isinstance(sample, InvalidSample):  # a writer went away: state, not data
-                        continue
-                    try:
+                    if isinstance(sample, RawBytes):  # not the notice of a writer gone away
                         handler(sample)
-                    except Exception as exc:
-                        self._log.every("handler", logging.ERROR, f"message dropped: {type(exc).__name__}: {exc}")
                 count += len(samples)
                 if len(samples) < _BATCH:
                     break
@@ -139,37 +164,12 @@ class DdsNode:
             return self._sim_time_ns
         return time.time_ns()
 
-    def _on_clock(self, sample: Any) -> None:
-        self._sim_time_ns = messages.stamp_ns(sample.clock)
+    def _on_clock(self, data: bytes) -> None:
+        try:
+            self._sim_time_ns = decode_clock_ns(data)
+        except Exception as exc:
+            self._log.every("clock", logging.ERROR, f"/clock message dropped: {type(exc).__name__}: {exc}")
 
-    def _on_description(self, sample: Any) -> None:
-        self.pipeline.set_description(sample.data)
-
-    def _on_joint_state(self, sample: Any) -> None:
-        self.messages_in += 1
-        results = self.pipeline.on_joint_state(
-            messages.stamp_ns(sample.header.stamp),
-            sample.name,
-            sample.position,
-            sample.velocity,
-            receive_ns=self._receive_ns(),
-        )
-        self._publish(results)
-
-    def _on_joint_trajectory(self, sample: Any) -> None:
-        self.messages_in += 1
-        points = [
-            TrajectoryPoint(p.positions, p.velocities, p.accelerations, messages.stamp_ns(p.time_from_start))
-            for p in sample.points
-        ]
-        stamp = messages.stamp_ns(sample.header.stamp)
-        self._publish(
-            self.pipeline.on_joint_trajectory(stamp, sample.joint_names, points, receive_ns=self._receive_ns())
-        )
-
-    def _publish(self, results: list) -> None:
-        for result in results:
-            for topic, contents in self.pipeline.messages(result):
-                typename, writer = self._writers[topic]
-                writer.write(raw_sample(typename, cdr.encode(typename, contents)))
-            self.messages_out += 1
+    def _publish(self, topic: str, payload: bytes) -> None:
+        typename, writer = self._writers[topic]
+        writer.write(raw_sample(typename, payload))

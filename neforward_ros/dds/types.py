@@ -101,7 +101,7 @@ class _RawDecoder:
         return RawBytes(data)
 
 
-def raw_reader(participant: Any, topic_name: str, typename: str, qos: Any) -> Any:
+def raw_reader(participant: Any, topic_name: str, typename: str, qos: Any, listener: Any = None) -> Any:
     """A DataReader of ``typename`` on DDS topic ``topic_name`` whose take() returns CDR bytes.
 
     The DDS type (name, key, type information) is the real one; only the Python-side decoding is
@@ -111,6 +111,6 @@ def raw_reader(participant: Any, topic_name: str, typename: str, qos: Any) -> An
     from cyclonedds.topic import Topic
 
     topic = Topic(participant, topic_name, dds_type(typename))
-    reader = DataReader(participant, topic, qos=qos)
+    reader = DataReader(participant, topic, qos=qos, listener=listener)
     topic.data_type = _RawDecoder
     return reader

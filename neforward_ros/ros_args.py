@@ -1,8 +1,12 @@
-"""The basic ``--ros-args`` of a ROS 2 node command line, for the no-ROS runtime.
+"""The ``--ros-args`` section of a ROS 2 node command line, read without ROS.
 
 Supported: ``-r``/``--remap from:=to`` (``__ns`` and ``__node`` included), ``-p``/``--param
 name:=value`` (the value read as YAML, as ROS 2 does), ``--params-file FILE`` and ``--log-level
-LEVEL``. A ``node:`` prefix restricts a rule to that node name. Anything else is an error.
+LEVEL``. A ``node:`` prefix restricts a rule to that node name.
+
+The no-ROS runtime reads its command line with this (``strict``: any other option is an error). The
+rclpy node reads the same section before rcl does (not strict: rcl's other options are skipped), so
+that both runtimes validate the same parameter files and ``-p`` values with the same messages.
 """
 
 from __future__ import annotations
@@ -14,6 +18,9 @@ from typing import Any
 import yaml
 
 from neforward_ros.errors import InputError
+
+# rcl options that take no value; every other rcl option takes one.
+_FLAG_PREFIXES = ("--enable-", "--disable-")
 
 
 @dataclass
@@ -28,11 +35,32 @@ class RosArgs:
     log_level: str | None = None
 
 
-def parse_ros_args(arguments: Sequence[str], node_name: str) -> RosArgs:
+def ros_args_section(argv: Sequence[str]) -> list[str]:
+    """The tokens of every ``--ros-args ... [--]`` section of a whole command line."""
+    out: list[str] = []
+    inside = False
+    for token in argv:
+        if token == "--ros-args":
+            inside = True
+        elif token == "--" and inside:
+            inside = False
+        elif inside:
+            out.append(token)
+    return out
+
+
+def parse_ros_args(arguments: Sequence[str], node_name: str, *, strict: bool = True) -> RosArgs:
     """Parse the tokens after ``--ros-args`` (up to an optional ``--``).
 
+    Args:
+        arguments: the tokens.
+        node_name: the node's name before remapping: rules prefixed with another node's name are
+            skipped.
+        strict: raise on options other than the supported ones; otherwise skip them as rcl reads
+            them (``--enable-*`` / ``--disable-*`` alone, any other with its value).
+
     Raises:
-        InputError: an unsupported option or a malformed rule.
+        InputError: an unsupported option (strict) or a malformed rule.
     """
     out = RosArgs()
     tokens = list(arguments)
@@ -42,6 +70,9 @@ def parse_ros_args(arguments: Sequence[str], node_name: str) -> RosArgs:
         if option == "--":
             break
         if option == "--ros-args":
+            k += 1
+            continue
+        if not strict and option.startswith(_FLAG_PREFIXES):
             k += 1
             continue
         if k + 1 >= len(tokens):
@@ -70,7 +101,7 @@ def parse_ros_args(arguments: Sequence[str], node_name: str) -> RosArgs:
             out.params_files.append(value)
         elif option == "--log-level":
             out.log_level = value.split(":")[-1].upper()
-        else:
+        elif strict:
             raise InputError(
                 f"--ros-args: {option} is not supported here (supported: -r, -p, --params-file, --log-level)"
             )

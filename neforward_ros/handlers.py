@@ -1,0 +1,106 @@
+"""The message handling both runtimes share: CDR bytes in, CDR bytes out.
+
+The rclpy node (raw subscriptions, serialized publishing) and the no-ROS DDS node (raw readers and
+writers) each hand the bytes of every incoming message to :class:`MessageHandlers` and give it a
+``publish(topic, payload)`` function; everything between (decoding, the pipeline, message building,
+encoding, publishing) happens here, once. No exception escapes a handler: whatever goes wrong with
+one message is logged, throttled, and the next message is handled as if nothing happened.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+from collections.abc import Callable
+
+from neforward_ros import cdr, messages
+from neforward_ros.logs import LogFunction, ThrottledLog
+from neforward_ros.pipeline import Pipeline, Result, TrajectoryPoint
+from neforward_ros.rostypes import deserialize
+
+Publish = Callable[[str, bytes], None]
+"""``publish(topic, payload)``: the runtime's publisher of the relative topic name, CDR bytes."""
+
+
+class MessageHandlers:
+    """Decode, compute, encode and publish, for every input topic of the node.
+
+    Args:
+        pipeline: the node's core.
+        publish: sends CDR bytes on one of ``pipeline.outputs()`` (relative topic names).
+        log: ``log(level, message)``.
+
+    Attributes:
+        messages_in: input messages handled (joint states or trajectories).
+        results_out: results published (one per output stamp).
+    """
+
+    def __init__(self, pipeline: Pipeline, publish: Publish, log: LogFunction | None = None) -> None:
+        self.pipeline = pipeline
+        self._publish = publish
+        self._log = ThrottledLog(log)
+        self._types = {output.topic: output.type for output in pipeline.outputs()}
+        self.messages_in = 0
+        self.results_out = 0
+
+    def on_joint_state(self, data: bytes, receive_ns: int) -> None:
+        """A sensor_msgs/JointState, as CDR bytes."""
+        self.messages_in += 1
+        try:
+            stamp, names, positions, velocities = cdr.decode_joint_state(data)
+            results = self.pipeline.on_joint_state(stamp, names, positions, velocities, receive_ns=receive_ns)
+        except Exception as exc:
+            self._dropped("joint state", exc)
+            return
+        self._publish_results(results, "joint state")
+
+    def on_joint_trajectory(self, data: bytes, receive_ns: int) -> None:
+        """A trajectory_msgs/JointTrajectory of supplied states, as CDR bytes."""
+        self.messages_in += 1
+        try:
+            message = deserialize(messages.JOINT_TRAJECTORY_TYPE, data)
+            points = [
+                TrajectoryPoint(
+                    p["positions"], p["velocities"], p["accelerations"], messages.stamp_ns(p["time_from_start"])
+                )
+                for p in message["points"]
+            ]
+            stamp = messages.stamp_ns(message["header"]["stamp"])
+            results = self.pipeline.on_joint_trajectory(stamp, message["joint_names"], points, receive_ns=receive_ns)
+        except Exception as exc:
+            self._dropped("joint trajectory", exc)
+            return
+        self._publish_results(results, "joint trajectory")
+
+    def on_description(self, data: bytes) -> None:
+        """A std_msgs/String robot description, as CDR bytes: replaces the model when valid."""
+        try:
+            self.pipeline.set_description(deserialize(messages.STRING_TYPE, data)["data"])
+        except Exception as exc:
+            self._dropped("robot description", exc)
+
+    def _publish_results(self, results: list[Result], what: str) -> None:
+        for result in results:
+            try:
+                payloads = [(topic, cdr.encode(self._types[topic], c)) for topic, c in self.pipeline.messages(result)]
+            except Exception as exc:
+                self._dropped(what, exc, "cannot build its messages")
+                continue
+            for topic, payload in payloads:
+                try:
+                    self._publish(topic, payload)
+                except Exception as exc:
+                    self._log.every(
+                        ("publish", topic), logging.ERROR, f"publishing on {topic} failed: {type(exc).__name__}: {exc}"
+                    )
+            self.results_out += 1
+
+    def _dropped(self, what: str, exc: Exception, why: str = "") -> None:
+        detail = f"{why}: " if why else ""
+        self._log.every(("dropped", what), logging.ERROR, f"{what} dropped: {detail}{type(exc).__name__}: {exc}")
+
+
+def decode_clock_ns(data: bytes) -> int:
+    """Nanoseconds of a rosgraph_msgs/Clock (or any message that starts with a builtin_interfaces/Time)."""
+    sec, nanosec = struct.unpack_from("<iI", data, 4)
+    return sec * 1_000_000_000 + nanosec
