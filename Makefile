@@ -32,10 +32,11 @@ test: $(VENV)/.installed-test $(ROS_VENV)/.installed
 	NEFORWARD_REQUIRE_ROS=1 NEFORWARD_ROS_PYTHON=$(CURDIR)/$(ROS_VENV)/bin/python $(BIN)/python -m pytest
 endif
 
-bench: $(VENV)/.installed-test
+bench: $(VENV)/.installed-test $(if $(HAVE_ROS),$(ROS_VENV)/.installed)
 	$(BIN)/python bench/bench_recursion.py
 	$(BIN)/python bench/bench_stream.py
 	$(BIN)/python bench/bench_dds.py
+	$(if $(HAVE_ROS),$(BIN)/python bench/bench_ros.py,@echo "make bench: no ROS 2 Jazzy, so bench/bench_ros.py is not run")
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)

@@ -45,6 +45,11 @@ def encode(typename: str, contents: Mapping[str, Any]) -> bytes:
     return bytes(buffer)
 
 
+def warm_up(typename: str) -> None:
+    """Generate the encoder of ``typename`` now (it is generated on first use otherwise)."""
+    _encoder(typename)
+
+
 @cache
 def _encoder(typename: str) -> Callable[[bytearray, Mapping[str, Any]], None]:
     if typename not in typestore().fielddefs:

@@ -40,6 +40,8 @@ class MessageHandlers:
         self._publish = publish
         self._log = ThrottledLog(log)
         self._types = {output.topic: output.type for output in pipeline.outputs()}
+        for typename in {*self._types.values(), messages.JOINT_STATE_TYPE}:
+            cdr.warm_up(typename)  # generate the encoders now, not while the first message waits
         self.messages_in = 0
         self.results_out = 0
 

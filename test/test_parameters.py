@@ -34,17 +34,27 @@ def test_bundled_params_file_holds_every_default() -> None:
     node_settings(values)
 
 
-def test_readme_tables_every_parameter_with_type_and_default() -> None:
+def test_readme_tables_every_parameter_with_type_default_and_whether_it_changes_at_run_time() -> None:
     readme = (ROOT / "README.md").read_text()
     for parameter in PARAMETERS:
         row = next((line for line in readme.splitlines() if line.startswith(f"| `{parameter.name}` |")), None)
         assert row is not None, f"README has no row for parameter {parameter.name}"
         assert f"| {parameter.type} |" in row, row
+        assert ("| no |" if parameter.read_only else "| yes |") in row, row
 
 
-def test_launch_file_is_python_that_defines_the_entry_point() -> None:
+def test_readme_tables_every_launch_argument() -> None:
+    """The launch file runs for real in test/ros; here its arguments are checked against the README."""
     tree = ast.parse((ROOT / "launch" / "neforward.launch.py").read_text())
-    assert any(isinstance(n, ast.FunctionDef) and n.name == "generate_launch_description" for n in tree.body)
+    declared = [
+        node.args[0].value
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Call) and getattr(node.func, "id", "") == "DeclareLaunchArgument"
+    ]
+    assert {"urdf", "namespace", "use_sim_time", "params_file"} <= set(declared), declared
+    readme = (ROOT / "README.md").read_text()
+    for name in declared:
+        assert f"| `{name}` |" in readme, f"README does not table launch argument {name}"
 
 
 def test_params_file_forms(tmp_path) -> None:
