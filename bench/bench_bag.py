@@ -21,9 +21,12 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
-from neforward_ros import cdr, load_model, messages
+from neforward_ros import load_model
 from neforward_ros.bag import BagOptions, process_bag
-from neforward_ros.rostypes import typestore
+from neforward_ros.node import topics
+from neforward_ros.stamps import time_message
+from neforward_ros.wire import cdr
+from neforward_ros.wire.rostypes import typestore
 
 URDF = Path(__file__).resolve().parent.parent / "config" / "panda.urdf"
 
@@ -38,11 +41,11 @@ def make_recording(path: Path, seconds: float) -> int:
     q[:, -1] *= 0.05  # the finger, in m
     store = typestore()
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        connection = writer.add_connection("/joint_states", messages.JOINT_STATE_TYPE, typestore=store)
+        connection = writer.add_connection("/joint_states", topics.JOINT_STATE_TYPE, typestore=store)
         for k in range(count):
             stamp = 1_700_000_000 * 10**9 + round(t[k] * 1e9)
-            contents = {"header": {"stamp": messages.time(stamp)}, "name": names, "position": q[k].tolist()}
-            writer.write(connection, stamp, cdr.encode(messages.JOINT_STATE_TYPE, contents))
+            contents = {"header": {"stamp": time_message(stamp)}, "name": names, "position": q[k].tolist()}
+            writer.write(connection, stamp, cdr.encode(topics.JOINT_STATE_TYPE, contents))
     return count
 
 

@@ -42,12 +42,12 @@ def echo_server() -> None:
     from cyclonedds.topic import Topic
     from cyclonedds.util import duration
 
-    from neforward_ros import messages
     from neforward_ros.dds.commands import domain_id
     from neforward_ros.dds.qos import default_qos
     from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
+    from neforward_ros.node import topics
 
-    typename = messages.JOINT_STATE_TYPE
+    typename = topics.JOINT_STATE_TYPE
     participant = DomainParticipant(domain_id())
     reader = raw_reader(participant, "rt/joint_states", typename, default_qos(typename))
     writer = DataWriter(participant, Topic(participant, "rt/echo", dds_type(typename)), qos=default_qos(typename))
@@ -74,11 +74,13 @@ def measure(
     from cyclonedds.qos import Policy, Qos
     from cyclonedds.topic import Topic
 
-    from neforward_ros import cdr, messages
     from neforward_ros.dds.qos import default_qos
     from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
+    from neforward_ros.node import topics
+    from neforward_ros.stamps import time_message
+    from neforward_ros.wire import cdr
 
-    typename = messages.JOINT_STATE_TYPE
+    typename = topics.JOINT_STATE_TYPE
     participant = DomainParticipant(peer_domain)
     writer = DataWriter(
         participant, Topic(participant, "rt/joint_states", dds_type(typename)), qos=default_qos(typename)
@@ -128,7 +130,7 @@ def measure(
             time.sleep(delay)
         positions[:] = 0.3 * np.sin(k / rate * np.arange(1, len(names) + 1))
         stamp = time.time_ns()
-        contents = {"header": {"stamp": messages.time(stamp)}, "name": names, "position": positions.tolist()}
+        contents = {"header": {"stamp": time_message(stamp)}, "name": names, "position": positions.tolist()}
         writer.write(raw_sample(typename, cdr.encode(typename, contents)))
     time.sleep(1.0)
     done.set()
@@ -157,8 +159,9 @@ def main() -> None:
     if args.echo_server:
         echo_server()
         return
-    from neforward_ros import load_model, messages
+    from neforward_ros import load_model
     from neforward_ros.dds.loopback import use_loopback
+    from neforward_ros.node import topics
 
     domain = use_loopback()
     rates = [float(r) for r in args.rates.split(",")]
@@ -176,11 +179,11 @@ def main() -> None:
             for what in ("floor", "node"):
                 if what == "floor":
                     process = start([sys.executable, __file__, "--echo-server"])
-                    topic, typename, expected_loss = "rt/echo", messages.JOINT_STATE_TYPE, 0
+                    topic, typename, expected_loss = "rt/echo", topics.JOINT_STATE_TYPE, 0
                 else:
                     command = [sys.executable, "-m", "neforward_ros.cli", "run", "--urdf", str(path)]
                     process = start([*command, "--ros-args", "-p", "estimator.mode:=causal"])
-                    topic, typename, expected_loss = "rt/neforward/link_states", messages.LINK_STATES_TYPE, 2
+                    topic, typename, expected_loss = "rt/neforward/link_states", topics.LINK_STATES_TYPE, 2
                 try:
                     latencies, sent, received = measure(domain, topic, typename, names, rate, args.seconds, process)
                 finally:

@@ -106,8 +106,10 @@ def serialization(arguments: argparse.Namespace) -> None:
     from rclpy.serialization import serialize_message
     from rosidl_runtime_py.set_message import set_message_fields
 
-    from neforward_ros import cdr, forward_recursion, load_model, messages
-    from neforward_ros.pipeline import make_result
+    from neforward_ros import forward_recursion, load_model
+    from neforward_ros.node import messages, topics
+    from neforward_ros.node.result import make_result
+    from neforward_ros.wire import cdr
 
     model = load_model(arguments.urdf)
     n = len(model.joint_names)
@@ -120,7 +122,7 @@ def serialization(arguments: argparse.Namespace) -> None:
         return serialize_message(message)
 
     def ours() -> bytes:
-        return cdr.encode(messages.LINK_STATES_TYPE, messages.link_states(result))
+        return cdr.encode(topics.LINK_STATES_TYPE, messages.link_states(result))
 
     assert typed() == ours(), "the two paths must give the same bytes"
     timings = {}

@@ -13,16 +13,16 @@ from typing import TYPE_CHECKING, Any
 _EXPORTS = {
     "DEFAULT_GRAVITY": "neforward_ros.recursion",
     "InputError": "neforward_ros.errors",
-    "JointEstimate": "neforward_ros.derivatives",
+    "JointEstimate": "neforward_ros.estimation.stream",
     "JointKind": "neforward_ros.model",
     "LinkKinematics": "neforward_ros.recursion",
     "ModelError": "neforward_ros.errors",
     "NeforwardError": "neforward_ros.errors",
     "ParentJoint": "neforward_ros.model",
     "RobotModel": "neforward_ros.model",
-    "StreamSettings": "neforward_ros.derivatives",
-    "StreamingEstimator": "neforward_ros.derivatives",
-    "estimate_derivatives": "neforward_ros.derivatives",
+    "StreamSettings": "neforward_ros.estimation.stream",
+    "StreamingEstimator": "neforward_ros.estimation.stream",
+    "estimate_derivatives": "neforward_ros.estimation.batch",
     "forward_recursion": "neforward_ros.recursion",
     "load_model": "neforward_ros.model",
 }
@@ -45,8 +45,9 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from neforward_ros.derivatives import JointEstimate, StreamingEstimator, StreamSettings, estimate_derivatives
     from neforward_ros.errors import InputError, ModelError, NeforwardError
+    from neforward_ros.estimation.batch import estimate_derivatives
+    from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator, StreamSettings
     from neforward_ros.model import JointKind, ParentJoint, RobotModel, load_model
     from neforward_ros.recursion import DEFAULT_GRAVITY, LinkKinematics, forward_recursion
 

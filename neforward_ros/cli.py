@@ -1,7 +1,7 @@
 """The ``neforward`` command.
 
 - ``neforward demo``: the node live over loopback DDS, fed by a synthetic 500 Hz joint-state
-  publisher, with a live view and a latency summary (:mod:`neforward_ros.dds.demo`).
+  publisher, with a live view and a latency summary (:mod:`neforward_ros.demo.live`).
 - ``neforward run``: the node over Cyclone DDS without ROS; ``neforward echo``: print a topic.
 - ``neforward table``: each link's omega, alpha, accel and com_accel along a short trajectory of a
   bundled (or ``--urdf``) robot, computed in one batched call of
@@ -14,89 +14,10 @@ import argparse
 import math
 import sys
 from collections.abc import Sequence
-from pathlib import Path
-
-import numpy as np
 
 from neforward_ros.errors import NeforwardError
-from neforward_ros.model import JointKind, RobotModel, load_model
-from neforward_ros.recursion import DEFAULT_GRAVITY, forward_recursion
-
-PACKAGE = "neforward_ros"
-DEFAULT_ROBOT = "panda.urdf"
-
-
-def bundled_config_path(name: str) -> Path:
-    """Path of a file shipped in the package's ``config/`` folder.
-
-    Looked up in the ROS package share folder when ament_index_python is importable, then beside the
-    source tree (a checkout or an editable install), then in ``<prefix>/share/neforward_ros/config``
-    where pip puts the package's data files.
-    """
-    candidates = []
-    try:
-        from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
-
-        try:
-            candidates.append(Path(get_package_share_directory(PACKAGE)) / "config" / name)
-        except PackageNotFoundError:
-            pass
-    except ImportError:
-        pass
-    candidates.append(Path(__file__).resolve().parent.parent / "config" / name)
-    candidates.append(Path(sys.prefix) / "share" / PACKAGE / "config" / name)
-    for path in candidates:
-        if path.is_file():
-            return path
-    raise FileNotFoundError(f"{name} is not in any of: {', '.join(str(p.parent) for p in candidates)}")
-
-
-def demo_trajectory(model: RobotModel, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """A smooth trajectory of every joint column: q = amplitude * sin(2 pi f t + phase).
-
-    Rotating joints swing 0.5 rad, prismatic ones 0.02 m, each at its own frequency.
-    """
-    amplitude = np.full(len(model.joint_names), 0.5)
-    for joint in model.parent_joints:
-        if joint is not None and joint.mimic_of is None and joint.kind is JointKind.PRISMATIC:
-            amplitude[joint.q_index] = 0.02
-    k = np.arange(len(model.joint_names))
-    omega = 2.0 * math.pi * (0.3 + 0.1 * k)
-    phase = 0.7 * k
-    arg = np.outer(times, omega) + phase
-    return amplitude * np.sin(arg), amplitude * omega * np.cos(arg), -amplitude * omega**2 * np.sin(arg)
-
-
-def _vector(values: np.ndarray) -> str:
-    # round() then + 0.0 so that round-off such as -1e-16 prints as 0.000, not -0.000
-    return "(" + ", ".join(f"{round(float(v), 3) + 0.0:8.3f}" for v in values) + ")"
-
-
-def run_demo(urdf: str | None, seconds: float, samples: int) -> None:
-    path = urdf if urdf is not None else bundled_config_path(DEFAULT_ROBOT)
-    model = load_model(path)
-    times = np.linspace(0.0, seconds, samples)
-    kin = forward_recursion(model, *demo_trajectory(model, times))
-    gravity = ", ".join(f"{g:g}" for g in DEFAULT_GRAVITY)
-    print(
-        f"neforward demo: robot {model.name!r} from {path}\n"
-        f"{len(model.link_names)} links, {len(model.joint_names)} joints, gravity ({gravity}) m/s^2 in the root "
-        f"frame {model.root_link!r}.\nEvery vector is in its link's own frame; accel and com_accel are specific "
-        "forces (what an accelerometer reads: +9.81 m/s^2 upward at rest)."
-    )
-    width = max(len(name) for name in model.link_names)
-    header = (
-        f"{'link':<{width}}  {'omega [rad/s]':^30}  {'alpha [rad/s^2]':^30}  "
-        f"{'accel [m/s^2]':^30}  {'com_accel [m/s^2]':^30}"
-    )
-    for t, time in enumerate(times):
-        print(f"\nt = {time:.3f} s")
-        print(header)
-        for k, name in enumerate(model.link_names):
-            print(
-                f"{name:<{width}}  {_vector(kin.omega[t, k])}  {_vector(kin.alpha[t, k])}  "
-                f"{_vector(kin.accel[t, k])}  {_vector(kin.com_accel[t, k])}"
-            )
+from neforward_ros.recursion import DEFAULT_GRAVITY
+from neforward_ros.resources import DEFAULT_ROBOT
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -155,11 +76,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "table":
             if args.samples < 1 or not (math.isfinite(args.seconds) and args.seconds >= 0):
                 raise NeforwardError("--samples must be at least 1 and --seconds a non-negative number")
-            run_demo(args.urdf, args.seconds, args.samples)
+            from neforward_ros.demo.table import print_table
+
+            print_table(args.urdf, args.seconds, args.samples)
         elif args.command == "demo":
             if not (math.isfinite(args.seconds) and args.seconds > 0 and math.isfinite(args.rate) and args.rate > 0):
                 raise NeforwardError("--seconds and --rate must be positive numbers")
-            from neforward_ros.dds.demo import live_demo
+            from neforward_ros.demo.live import live_demo
 
             return live_demo(args.seconds, args.urdf, args.rate)
         elif args.command == "run":

@@ -27,17 +27,12 @@ from std_msgs.msg import String
 from trajectory_msgs.msg import JointTrajectory
 
 from neforward_ros.errors import NeforwardError
-from neforward_ros.handlers import MessageHandlers
 from neforward_ros.model import load_model, require_urdf_parser
-from neforward_ros.parameters import (
-    DEFAULTS,
-    NODE_NAME,
-    PARAMETERS,
-    command_line_parameters,
-    node_settings,
-)
-from neforward_ros.pipeline import JOINT_STATES, JOINT_STATES_ACCEL, ROBOT_DESCRIPTION, Pipeline
-from neforward_ros.ros_args import ros_args_section
+from neforward_ros.node.handlers import MessageHandlers
+from neforward_ros.node.pipeline import Pipeline
+from neforward_ros.node.ros_args import ros_args_section
+from neforward_ros.node.settings import DEFAULTS, NODE_NAME, PARAMETERS, command_line_parameters, node_settings
+from neforward_ros.node.topics import JOINT_STATES, JOINT_STATES_ACCEL, ROBOT_DESCRIPTION
 
 OUTPUT_QOS_DEPTH = 10
 

@@ -16,9 +16,10 @@ from cyclonedds.qos import Policy, Qos
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from neforward_ros import cdr, messages
 from neforward_ros.dds.qos import default_qos, latched_qos
 from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
+from neforward_ros.stamps import time_message
+from neforward_ros.wire import cdr
 
 STARTUP_TIMEOUT = 30.0
 
@@ -119,7 +120,7 @@ class Peer:
 
 def joint_state(stamp_ns: int, names, positions, velocities=()) -> dict:
     return {
-        "header": {"stamp": messages.time(stamp_ns)},
+        "header": {"stamp": time_message(stamp_ns)},
         "name": list(names),
         "position": list(positions),
         "velocity": list(velocities),

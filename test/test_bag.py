@@ -7,10 +7,12 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
-from neforward_ros import cdr, messages
 from neforward_ros.bag import BagOptions, process_bag
 from neforward_ros.cli import main
-from neforward_ros.rostypes import typestore
+from neforward_ros.node import messages, topics
+from neforward_ros.stamps import time_message
+from neforward_ros.wire import cdr
+from neforward_ros.wire.rostypes import typestore
 
 from conftest import CONFIG_DIR
 from oracle import PinocchioOracle
@@ -35,21 +37,21 @@ def record(path, *, seconds=4.0, velocities=False, storage=StoragePlugin.MCAP, d
     q, qd, _ = trajectory(t)
     store = typestore()
     with Writer(path, version=9, storage_plugin=storage) as writer:
-        joint_states = writer.add_connection("/joint_states", messages.JOINT_STATE_TYPE, typestore=store)
+        joint_states = writer.add_connection("/joint_states", topics.JOINT_STATE_TYPE, typestore=store)
         if description:
-            connection = writer.add_connection("/robot_description", messages.STRING_TYPE, typestore=store)
-            writer.write(connection, EPOCH, cdr.encode(messages.STRING_TYPE, {"data": PANDA.read_text()}))
+            connection = writer.add_connection("/robot_description", topics.STRING_TYPE, typestore=store)
+            writer.write(connection, EPOCH, cdr.encode(topics.STRING_TYPE, {"data": PANDA.read_text()}))
         for topic, kind in extra.get("other_topics", []):
             writer.add_connection(topic, kind, typestore=store)
         names = extra.get("names", NAMES)
         for run in range(runs):  # concatenated runs: stamps go back at each new run
             for k in range(count):
                 stamp = EPOCH + round(t[k] * 1e9)
-                contents = {"header": {"stamp": messages.time(stamp)}, "name": names, "position": q[k].tolist()}
+                contents = {"header": {"stamp": time_message(stamp)}, "name": names, "position": q[k].tolist()}
                 if velocities:
                     contents["velocity"] = qd[k].tolist()
                 log_time = EPOCH + run * 10**10 + round(t[k] * 1e9)
-                writer.write(joint_states, log_time, cdr.encode(messages.JOINT_STATE_TYPE, contents))
+                writer.write(joint_states, log_time, cdr.encode(topics.JOINT_STATE_TYPE, contents))
     return t
 
 
@@ -100,14 +102,14 @@ def test_outputs_match_pinocchio_on_the_analytic_trajectory(tmp_path, storage, v
     assert len(out["/neforward/link_states"]) == 2000
     check_against_pinocchio(out["/neforward/link_states"], out["/neforward/com_states"])
     log_time, raw = out["/neforward/panda_hand/imu"][0]
-    imu = typestore().deserialize_cdr(raw, messages.IMU_TYPE)
+    imu = typestore().deserialize_cdr(raw, topics.IMU_TYPE)
     assert imu.header.frame_id == "panda_hand" and log_time == out["/neforward/link_states"][0][0]
 
 
 def test_batched_messages_equal_the_node_message_building(tmp_path) -> None:
     """The bag's vectorised encoding gives the same bytes as the node's per-message path."""
     from neforward_ros import forward_recursion, load_model
-    from neforward_ros.pipeline import make_result
+    from neforward_ros.node.result import make_result
 
     model = load_model(PANDA)
     t = np.linspace(0.0, 1.0, 7)
@@ -118,15 +120,15 @@ def test_batched_messages_equal_the_node_message_building(tmp_path) -> None:
         (messages.link_states, messages.link_states_blocks),
         (messages.com_states, messages.com_states_blocks),
     ):
-        template = cdr.encode(messages.LINK_STATES_TYPE, builder(batch.sample(0), "p/"))
+        template = cdr.encode(topics.LINK_STATES_TYPE, builder(batch.sample(0), "p/"))
         rows = cdr.patch_multi_dof(template, stamps, *blocks(batch))
         for i in range(len(t)):
             # byte for byte what the per-message path encodes from the same numbers
-            assert rows[i].tobytes() == cdr.encode(messages.LINK_STATES_TYPE, builder(batch.sample(i), "p/"))
+            assert rows[i].tobytes() == cdr.encode(topics.LINK_STATES_TYPE, builder(batch.sample(i), "p/"))
             # and the same numbers as the node's single-sample computation, to rounding
             single = make_result(model, int(stamps[i]), forward_recursion(model, q[i], qd[i], qdd[i]), None)
             a = cdr.decode_multi_dof(rows[i].tobytes())
-            b = cdr.decode_multi_dof(cdr.encode(messages.LINK_STATES_TYPE, builder(single, "p/")))
+            b = cdr.decode_multi_dof(cdr.encode(topics.LINK_STATES_TYPE, builder(single, "p/")))
             assert a.stamp_ns == b.stamp_ns and a.joint_names == b.joint_names
             for x, y in zip(
                 (a.transforms, a.velocities, a.accelerations),
@@ -171,8 +173,8 @@ def bad_cases(tmp_path):
     (tmp_path / "text.txt").write_text("hello")
     record(tmp_path / "no_js", seconds=0.1, description=True, names=NAMES, other_topics=[])
     with Writer(tmp_path / "only_other", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        connection = writer.add_connection("/odom_text", messages.STRING_TYPE, typestore=typestore())
-        writer.write(connection, EPOCH, cdr.encode(messages.STRING_TYPE, {"data": "x"}))
+        connection = writer.add_connection("/odom_text", topics.STRING_TYPE, typestore=typestore())
+        writer.write(connection, EPOCH, cdr.encode(topics.STRING_TYPE, {"data": "x"}))
     record(tmp_path / "missing_joint", seconds=0.2, names=[*NAMES[:-1], "not_the_finger"])
     record(tmp_path / "corrupt", seconds=1.0)
     storage = next((tmp_path / "corrupt").glob("*.mcap"))
@@ -222,11 +224,11 @@ def test_bad_input_is_one_error_line_and_no_output(tmp_path, capsys) -> None:
 
 
 def test_batched_mcap_writing_equals_rosbags_message_by_message(tmp_path, monkeypatch) -> None:
-    from neforward_ros import bag
+    from neforward_ros.bag import write as bag_write
 
     record(tmp_path / "in", seconds=3.0)
     process_bag(tmp_path / "in", tmp_path / "fast", BagOptions())
-    monkeypatch.setattr(bag, "_FAST_MCAP", False)
+    monkeypatch.setattr(bag_write, "_FAST_MCAP", False)
     process_bag(tmp_path / "in", tmp_path / "slow", BagOptions())
     fast, slow = read_output(tmp_path / "fast"), read_output(tmp_path / "slow")
     assert fast.keys() == slow.keys() and all(fast[topic] == slow[topic] for topic in fast)

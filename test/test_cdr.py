@@ -6,7 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from neforward_ros import InputError, cdr, rostypes
+from neforward_ros import InputError
+from neforward_ros.wire import cdr, rostypes
 
 TYPES = [
     "sensor_msgs/msg/JointState",

@@ -9,7 +9,8 @@ import sys
 
 import pytest
 
-from neforward_ros.cli import bundled_config_path, main
+from neforward_ros.cli import main
+from neforward_ros.resources import bundled_config_path
 
 from conftest import CONFIG_DIR, TEST_ROBOTS, require
 

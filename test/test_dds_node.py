@@ -18,10 +18,13 @@ import time
 import numpy as np
 import pytest
 
-from neforward_ros import cdr, forward_recursion, load_model, messages, rostypes
+from neforward_ros import forward_recursion, load_model
 from neforward_ros.dds.graph import DISCOVERY_TOPIC, DISCOVERY_TYPE
 from neforward_ros.dds.loopback import write_config
 from neforward_ros.dds.types import type_hash
+from neforward_ros.node import topics
+from neforward_ros.stamps import time_message
+from neforward_ros.wire import cdr, rostypes
 
 from conftest import CONFIG_DIR
 from dds_peer import NodeProcess, Peer, joint_state, loopback_env
@@ -96,12 +99,12 @@ def check_still_outputs(link_states: bytes, accel: bytes | None, imu: bytes | No
     np.testing.assert_allclose(point.accelerations[:, 3:], 0.0, atol=1e-6)
     hand = MODEL.link_index["panda_hand"]
     if accel is not None:
-        message = rostypes.deserialize(messages.ACCEL_TYPE, accel)
+        message = rostypes.deserialize(topics.ACCEL_TYPE, accel)
         assert message["header"]["frame_id"] == "panda_hand"
         linear = [message["accel"]["linear"][k] for k in "xyz"]
         np.testing.assert_allclose(linear, expected.accel[hand], atol=1e-6)
     if imu is not None:
-        message = rostypes.deserialize(messages.IMU_TYPE, imu)
+        message = rostypes.deserialize(topics.IMU_TYPE, imu)
         linear = [message["linear_acceleration"][k] for k in "xyz"]
         np.testing.assert_allclose(linear, expected.accel[hand], atol=1e-6)  # specific force: +g at rest
 
@@ -112,10 +115,10 @@ OUTPUTS = ("/neforward/link_states", "/neforward/panda_hand/accel", "/neforward/
 
 def peer_for_outputs(domain: int) -> Peer:
     peer = Peer(domain)
-    peer.writer("/joint_states", messages.JOINT_STATE_TYPE)
-    peer.reader("/neforward/link_states", messages.LINK_STATES_TYPE)
-    peer.reader("/neforward/panda_hand/accel", messages.ACCEL_TYPE)
-    peer.reader("/neforward/panda_hand/imu", messages.IMU_TYPE)
+    peer.writer("/joint_states", topics.JOINT_STATE_TYPE)
+    peer.reader("/neforward/link_states", topics.LINK_STATES_TYPE)
+    peer.reader("/neforward/panda_hand/accel", topics.ACCEL_TYPE)
+    peer.reader("/neforward/panda_hand/imu", topics.IMU_TYPE)
     return peer
 
 
@@ -137,15 +140,15 @@ def test_link_states_accel_and_imu_match_forward_recursion(start, domain) -> Non
 def test_supplied_states_give_exact_kinematics_over_the_wire(start, domain) -> None:
     node = start("--urdf", str(PANDA), "--ros-args", "-p", "acceleration_source:=supplied")
     peer = Peer(domain)
-    peer.writer("/joint_states_accel", messages.JOINT_TRAJECTORY_TYPE)
-    peer.reader("/neforward/link_states", messages.LINK_STATES_TYPE)
-    peer.reader("/neforward/com_states", messages.LINK_STATES_TYPE)
+    peer.writer("/joint_states_accel", topics.JOINT_TRAJECTORY_TYPE)
+    peer.reader("/neforward/link_states", topics.LINK_STATES_TYPE)
+    peer.reader("/neforward/com_states", topics.LINK_STATES_TYPE)
     peer.wait_connected(node)
     rng = np.random.default_rng(11)
     q, qd, qdd = (rng.uniform(-2, 2, len(NAMES)) for _ in range(3))
     point = {"positions": q.tolist(), "velocities": qd.tolist(), "accelerations": qdd.tolist()}
     peer.write(
-        "/joint_states_accel", {"header": {"stamp": messages.time(EPOCH)}, "joint_names": NAMES, "points": [point]}
+        "/joint_states_accel", {"header": {"stamp": time_message(EPOCH)}, "joint_names": NAMES, "points": [point]}
     )
     received = {"/neforward/link_states": [], "/neforward/com_states": []}
     collect(peer, received, lambda r: all(r.values()))
@@ -168,7 +171,7 @@ def test_model_from_the_transient_local_topic_after_the_node_started(start, doma
     q = np.full(len(NAMES), 0.2)
     early = stream(peer, still_states(q, 5), rate=100.0, topics=OUTPUTS)  # before the model: dropped
     assert not any(early.values())
-    description = peer.writer("/robot_description", messages.STRING_TYPE, latched=True)
+    description = peer.writer("/robot_description", topics.STRING_TYPE, latched=True)
     peer.write("/robot_description", {"data": PANDA.read_text()})
     deadline = time.monotonic() + 10
     while "model 'panda'" not in node.log() and time.monotonic() < deadline:
@@ -231,8 +234,8 @@ def test_200_hz_for_5_s_loses_no_output(start, domain) -> None:
         "-p", "qos_overrides./neforward/link_states.publisher.depth:=2000",
     )  # fmt: skip
     peer = Peer(domain)
-    peer.writer("/joint_states", messages.JOINT_STATE_TYPE)
-    peer.reader("/neforward/link_states", messages.LINK_STATES_TYPE)
+    peer.writer("/joint_states", topics.JOINT_STATE_TYPE)
+    peer.reader("/neforward/link_states", topics.LINK_STATES_TYPE)
     peer.wait_connected(node)
     times = np.arange(1000) / 200.0
     q = 0.5 * np.sin(np.outer(times, np.linspace(1.0, 3.0, len(NAMES))))
@@ -255,8 +258,8 @@ def test_names_and_types_on_the_wire_are_ros2s(start, domain) -> None:
         "-p", "imu_links:=[panda_hand]",
     )  # fmt: skip
     peer = Peer(domain)
-    peer.writer("/arm/joint_states", messages.JOINT_STATE_TYPE)
-    peer.reader("/robot1/neforward/link_states", messages.LINK_STATES_TYPE)
+    peer.writer("/arm/joint_states", topics.JOINT_STATE_TYPE)
+    peer.reader("/robot1/neforward/link_states", topics.LINK_STATES_TYPE)
     peer.wait_connected(node)
     publications, subscriptions = {}, {}
     for kind, store in ((BuiltinTopicDcpsPublication, publications), (BuiltinTopicDcpsSubscription, subscriptions)):
@@ -268,9 +271,9 @@ def test_names_and_types_on_the_wire_are_ros2s(start, domain) -> None:
                     store[endpoint.topic_name] = endpoint
             time.sleep(0.05)
     expected_writers = {
-        "rt/robot1/neforward/link_states": messages.LINK_STATES_TYPE,
-        "rt/robot1/neforward/com_states": messages.LINK_STATES_TYPE,
-        "rt/robot1/neforward/panda_hand/imu": messages.IMU_TYPE,
+        "rt/robot1/neforward/link_states": topics.LINK_STATES_TYPE,
+        "rt/robot1/neforward/com_states": topics.LINK_STATES_TYPE,
+        "rt/robot1/neforward/panda_hand/imu": topics.IMU_TYPE,
         DISCOVERY_TOPIC: DISCOVERY_TYPE,
     }
     for topic, typename in expected_writers.items():
@@ -278,7 +281,7 @@ def test_names_and_types_on_the_wire_are_ros2s(start, domain) -> None:
         package, kind, name = typename.split("/")
         assert endpoint.type_name == f"{package}::{kind}::dds_::{name}_"
         assert endpoint.qos[Policy.Userdata].data == f"typehash={type_hash(typename)};".encode()
-    assert type_hash(messages.LINK_STATES_TYPE).startswith("RIHS01_")
+    assert type_hash(topics.LINK_STATES_TYPE).startswith("RIHS01_")
     joint_states = subscriptions["rt/arm/joint_states"]  # remapped from the relative joint_states
     assert joint_states.type_name == "sensor_msgs::msg::dds_::JointState_"
 
@@ -325,7 +328,7 @@ def test_ctrl_c_exits_cleanly_and_startup_errors_are_one_line(start, config_uri,
 def test_echo_prints_yaml_like_ros2_topic_echo(start, config_uri, domain) -> None:
     node = start("--urdf", str(PANDA), "--ros-args", *PER_LINK)
     peer = Peer(domain)
-    peer.writer("/joint_states", messages.JOINT_STATE_TYPE)
+    peer.writer("/joint_states", topics.JOINT_STATE_TYPE)
     peer.wait_connected(node)
     environment = {**os.environ, "CYCLONEDDS_URI": config_uri, "ROS_DOMAIN_ID": str(domain)}
     echo = subprocess.Popen(
@@ -349,15 +352,15 @@ def test_echo_prints_yaml_like_ros2_topic_echo(start, config_uri, domain) -> Non
 def test_use_sim_time_stamps_zero_stamped_input_with_the_clock_topic(start, domain) -> None:
     node = start("--urdf", str(PANDA), "--ros-args", "-p", "use_sim_time:=true", "-p", "estimator.mode:=causal")
     peer = Peer(domain)
-    peer.writer("/joint_states", messages.JOINT_STATE_TYPE)
+    peer.writer("/joint_states", topics.JOINT_STATE_TYPE)
     peer.writer("/clock", "rosgraph_msgs/msg/Clock")
-    peer.reader("/neforward/link_states", messages.LINK_STATES_TYPE)
+    peer.reader("/neforward/link_states", topics.LINK_STATES_TYPE)
     peer.wait_connected(node)
     q = np.zeros(len(NAMES)).tolist()
     received: dict[str, list[bytes]] = {"/neforward/link_states": []}
     sim = 42 * 10**9
     for k in range(10):  # the simulator's clock ticks, the driver leaves header.stamp empty
-        peer.write("/clock", {"clock": messages.time(sim + k * 10_000_000)})
+        peer.write("/clock", {"clock": time_message(sim + k * 10_000_000)})
         time.sleep(0.02)
         peer.write("/joint_states", joint_state(0, NAMES, q))
         time.sleep(0.02)

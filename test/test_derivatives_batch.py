@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from neforward_ros import InputError
-from neforward_ros.derivatives import estimate_derivatives
+from neforward_ros.estimation.batch import estimate_derivatives
 
 from conftest import jittered_stamps, reference, relative_rms
 

@@ -11,7 +11,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from neforward_ros import InputError
-from neforward_ros.derivatives import JointEstimate, StreamingEstimator, StreamSettings, estimate_derivatives
+from neforward_ros.estimation.batch import estimate_derivatives
+from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator, StreamSettings
 
 from conftest import jittered_stamps, reference, relative_rms
 

@@ -8,7 +8,7 @@ import re
 import pytest
 
 from neforward_ros import InputError
-from neforward_ros.parameters import (
+from neforward_ros.node.settings import (
     DEFAULTS,
     PARAMETERS,
     QosOverride,

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from neforward_ros import rostypes
-from neforward_ros.parameters import node_settings
-from neforward_ros.pipeline import Pipeline, TrajectoryPoint
+from neforward_ros.node.pipeline import Pipeline, TrajectoryPoint
+from neforward_ros.node.settings import node_settings
+from neforward_ros.wire import rostypes
 
 from conftest import CONFIG_DIR, TEST_ROBOTS, assert_close
 from oracle import GRAVITY, PinocchioOracle

@@ -15,14 +15,14 @@ from typing import Any
 
 import yaml
 
-from neforward_ros import messages
-from neforward_ros.dds.names import NodeNames
 from neforward_ros.dds.qos import default_qos, latched_qos
 from neforward_ros.dds.types import RawBytes, raw_reader
 from neforward_ros.errors import InputError
 from neforward_ros.model import require_urdf_parser
-from neforward_ros.parameters import NODE_NAME, command_line_parameters, node_settings
-from neforward_ros.rostypes import deserialize
+from neforward_ros.node import topics
+from neforward_ros.node.names import NodeNames
+from neforward_ros.node.settings import NODE_NAME, command_line_parameters, node_settings
+from neforward_ros.wire.rostypes import deserialize
 
 _LEVELS = {"DEBUG": logging.DEBUG, "INFO": logging.INFO, "WARN": logging.WARNING, "WARNING": logging.WARNING}
 _LEVELS.update({"ERROR": logging.ERROR, "FATAL": logging.CRITICAL})
@@ -82,15 +82,15 @@ def run_node(urdf: str | None, params_file: str | None, ros_args: Sequence[str])
 
 
 KNOWN_TYPES = {
-    "link_states": messages.LINK_STATES_TYPE,
-    "com_states": messages.LINK_STATES_TYPE,
-    "accel": messages.ACCEL_TYPE,
-    "twist": messages.TWIST_TYPE,
-    "imu": messages.IMU_TYPE,
-    "markers": messages.MARKERS_TYPE,
-    "joint_states": messages.JOINT_STATE_TYPE,
-    "joint_states_accel": messages.JOINT_TRAJECTORY_TYPE,
-    "robot_description": messages.STRING_TYPE,
+    "link_states": topics.LINK_STATES_TYPE,
+    "com_states": topics.LINK_STATES_TYPE,
+    "accel": topics.ACCEL_TYPE,
+    "twist": topics.TWIST_TYPE,
+    "imu": topics.IMU_TYPE,
+    "markers": topics.MARKERS_TYPE,
+    "joint_states": topics.JOINT_STATE_TYPE,
+    "joint_states_accel": topics.JOINT_TRAJECTORY_TYPE,
+    "robot_description": topics.STRING_TYPE,
 }
 
 

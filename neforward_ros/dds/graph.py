@@ -14,9 +14,9 @@ from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 
-from neforward_ros import cdr
 from neforward_ros.dds.qos import latched_qos
 from neforward_ros.dds.types import dds_type, raw_sample
+from neforward_ros.wire import cdr
 
 DISCOVERY_TOPIC = "ros_discovery_info"  # no rt/ prefix: an RMW-internal topic
 DISCOVERY_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"

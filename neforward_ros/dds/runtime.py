@@ -20,15 +20,16 @@ from cyclonedds.qos import Policy, Qos
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from neforward_ros import messages
 from neforward_ros.dds.graph import GraphAnnouncer
-from neforward_ros.dds.names import NodeNames
 from neforward_ros.dds.qos import default_qos, latched_qos, participant_qos
 from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
-from neforward_ros.handlers import MessageHandlers, decode_clock_ns
 from neforward_ros.logs import LogFunction, ThrottledLog
-from neforward_ros.parameters import NodeSettings
-from neforward_ros.pipeline import JOINT_STATES, JOINT_STATES_ACCEL, ROBOT_DESCRIPTION, Pipeline
+from neforward_ros.node import topics
+from neforward_ros.node.handlers import MessageHandlers, decode_clock_ns
+from neforward_ros.node.names import NodeNames
+from neforward_ros.node.pipeline import Pipeline
+from neforward_ros.node.settings import NodeSettings
+from neforward_ros.node.topics import JOINT_STATES, JOINT_STATES_ACCEL, ROBOT_DESCRIPTION
 
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -72,11 +73,11 @@ class DdsNode:
         self.handlers = MessageHandlers(self.pipeline, self._publish, log=log)
         self._readers: list[tuple[Any, Callable[[bytes], None]]] = []
         if settings.acceleration_source == "supplied":
-            self._input(JOINT_STATES_ACCEL, messages.JOINT_TRAJECTORY_TYPE, self.handlers.on_joint_trajectory)
+            self._input(JOINT_STATES_ACCEL, topics.JOINT_TRAJECTORY_TYPE, self.handlers.on_joint_trajectory)
         else:
-            self._input(JOINT_STATES, messages.JOINT_STATE_TYPE, self.handlers.on_joint_state)
+            self._input(JOINT_STATES, topics.JOINT_STATE_TYPE, self.handlers.on_joint_state)
         if not settings.robot_description:
-            string = messages.STRING_TYPE
+            string = topics.STRING_TYPE
             self._reader(ROBOT_DESCRIPTION, string, latched_qos(string), self.handlers.on_description)
         self._sim_time_ns: int | None = None
         if use_sim_time:

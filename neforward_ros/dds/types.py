@@ -14,7 +14,7 @@ from cyclonedds.idl import IdlStruct, make_idl_struct
 from cyclonedds.idl import types as idl
 
 from neforward_ros.errors import InputError
-from neforward_ros.rostypes import typestore
+from neforward_ros.wire.rostypes import typestore
 
 _BASE = {
     "bool": bool,

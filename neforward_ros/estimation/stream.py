@@ -1,25 +1,9 @@
-"""Joint velocities and accelerations from sampled joint positions.
+"""Joint velocities and accelerations from joint-state messages, one message at a time.
 
-Method ``"polyfit"`` (the default) is a local polynomial least-squares fit on the samples' own,
-possibly irregular, time stamps: Savitzky-Golay smoothing generalised to non-uniform sampling. For
-each target time t*, a polynomial of degree ``order`` in (t - t*) is fitted to the samples within
-``window / 2`` seconds of t*, and its first and second derivatives at t* are the estimates. Near
-the ends of a recording the window holds only earlier or only later samples, which makes a
-one-sided fit. Method ``"difference"`` is the plain baseline: second-order finite differences on
-the non-uniform grid (``numpy.gradient``), applied twice.
-
-Defaults (degree 4, 0.2 s window) were chosen for positions sampled at a few hundred Hz with
-encoder-level noise. On the reference test signal (sum of sinusoids 0.2-1.6 Hz, 500 Hz with +-10 %
-stamp jitter) q-ddot is within 2e-3 relative RMS noise-free and 2 % with 1e-4 rad noise; the
-README gives the measured figures.
-
-:func:`estimate_derivatives` works on a whole recording (it may look ahead); :class:`StreamingEstimator`
-takes one joint-state message at a time, for the node, in a causal mode (estimate at the newest
-sample) or a fixed-lag mode (estimate ``lag`` seconds back, equal to the whole-recording estimate on
-interior samples).
-
-Time: stamps may be float seconds, or integer nanoseconds (as ``builtin_interfaces/Time`` gives
-them), which keeps epoch-sized stamps exact. All arithmetic is done relative to the first stamp.
+:class:`StreamingEstimator` keeps each joint's recent samples and, for every message, returns the
+estimates that message completes: in ``causal`` mode at the newest sample (a one-sided fit), in
+``fixed_lag`` mode ``lag`` seconds back (a centred fit, equal to the whole-recording estimate).
+Bad input never raises; it is dropped and logged (throttled).
 """
 
 from __future__ import annotations
@@ -29,229 +13,24 @@ import math
 from collections import deque
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from neforward_ros.errors import InputError
+from neforward_ros.estimation.fit import (
+    DEFAULT_ORDER,
+    DEFAULT_WINDOW,
+    check_settings,
+    fit_at,
+    local_difference,
+)
 from neforward_ros.logs import LogFunction, ThrottledLog
-
-METHODS = ("polyfit", "difference")
-DEFAULT_WINDOW = 0.2
-"""Full width of the local fit, s."""
-DEFAULT_ORDER = 4
-"""Degree of the local polynomial."""
-
-_CHUNK = 4096  # targets per vectorised block: bounds memory at about CHUNK * window samples
-
-
-def relative_seconds(stamps: Any) -> np.ndarray:
-    """Stamps as float seconds since the first one.
-
-    Integer input is taken as nanoseconds and subtracted exactly before conversion, so epoch-sized
-    stamps (1.7e18 ns) keep nanosecond resolution; float input is taken as seconds.
-    """
-    t = np.asarray(stamps)
-    if t.ndim != 1:
-        raise InputError(f"stamps must be a 1-D array, got shape {t.shape}")
-    if t.size == 0:
-        return t.astype(float)
-    if np.issubdtype(t.dtype, np.integer):
-        return (t.astype(np.int64) - np.int64(t[0])).astype(float) * 1e-9
-    try:
-        t = t.astype(float)
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"stamps are not numbers: {exc}") from exc
-    return t - t[0]
-
-
-def estimate_derivatives(
-    t: Any,
-    q: Any,
-    *,
-    method: str = "polyfit",
-    window: float = DEFAULT_WINDOW,
-    order: int = DEFAULT_ORDER,
-    wrap: Sequence[bool] | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Velocities and accelerations of a whole recording of positions (non-causal).
-
-    Args:
-        t: sample stamps, shape (T,), strictly increasing: float seconds or integer nanoseconds.
-        q: positions, shape (T,) or (T, n) (rad or m).
-        method: ``"polyfit"`` (local polynomial fit, default) or ``"difference"``.
-        window: full width in seconds of the local fit (polyfit). A window holding fewer than
-            ``order + 1`` samples is widened to the ``order + 1`` nearest samples.
-        order: degree of the local polynomial (polyfit), at least 2.
-        wrap: per column, True for a continuous joint whose positions wrap at +-pi; those
-            columns are unwrapped before differentiating.
-
-    Returns:
-        (qd, qdd), each with q's shape, in units per second and per second squared.
-
-    Raises:
-        InputError: stamps not strictly increasing, lengths that differ, NaN/inf, fewer than 3
-            samples, or an unknown method or bad window/order.
-    """
-    seconds = relative_seconds(t)
-    positions = np.asarray(q, dtype=float)
-    one_dimensional = positions.ndim == 1
-    if one_dimensional:
-        positions = positions[:, None]
-    if positions.ndim != 2 or positions.shape[0] != seconds.shape[0]:
-        raise InputError(f"q has shape {np.shape(q)}; expected ({len(seconds)},) or ({len(seconds)}, n) to match t")
-    _check_settings(method, window, order)
-    if len(seconds) < 3:
-        raise InputError(f"need at least 3 samples to estimate accelerations, got {len(seconds)}")
-    if not np.all(np.isfinite(seconds)) or not np.all(np.isfinite(positions)):
-        raise InputError("t and q must be finite (no NaN or inf)")
-    steps = np.diff(seconds)
-    if np.any(steps <= 0.0):
-        k = int(np.argmax(steps <= 0.0))
-        raise InputError(
-            f"stamps must increase strictly: sample {k + 1} is not after sample {k}; "
-            "split the recording where time goes backwards and estimate each segment on its own"
-        )
-    if wrap is not None:
-        mask = np.asarray(wrap, dtype=bool)
-        if mask.shape != (positions.shape[1],):
-            raise InputError(f"wrap has {mask.size} entries for {positions.shape[1]} columns")
-        positions = positions.copy()
-        positions[:, mask] = np.unwrap(positions[:, mask], axis=0)
-
-    if method == "difference":
-        qd = np.gradient(positions, seconds, axis=0, edge_order=2)
-        qdd = np.gradient(qd, seconds, axis=0, edge_order=2)
-    else:
-        _, qd, qdd = local_polynomial(seconds, positions, seconds, window / 2.0, order)
-    if one_dimensional:
-        return qd[:, 0], qdd[:, 0]
-    return qd, qdd
-
-
-def estimate_at(
-    t: np.ndarray,
-    q: np.ndarray,
-    targets: np.ndarray,
-    *,
-    velocity: np.ndarray | None = None,
-    method: str = "polyfit",
-    window: float = DEFAULT_WINDOW,
-    order: int = DEFAULT_ORDER,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Positions, velocities and accelerations at arbitrary target times, non-causal.
-
-    The whole-recording estimate for joints sampled at their own times (partial messages from
-    several drivers): columns of ``q`` share the sample times ``t``; ``targets`` need not be
-    samples. Where a target is a sample, its position (and given velocity) is used as it is.
-
-    Args:
-        t: sample times (T,), s, strictly increasing, T >= 3.
-        q: positions (T, m), already unwrapped.
-        targets: times (M,), s.
-        velocity: measured velocities (T, m), or None to differentiate positions; when given, the
-            acceleration is the derivative of velocity.
-        method, window, order: as for :func:`estimate_derivatives`.
-
-    Returns:
-        three (M, m) arrays.
-    """
-    _check_settings(method, window, order)
-    index = np.minimum(np.searchsorted(t, targets), len(t) - 1)
-    exact = t[index] == targets
-    if method == "difference":
-        d1 = np.gradient(q, t, axis=0, edge_order=2) if velocity is None else velocity
-        d2 = np.gradient(d1, t, axis=0, edge_order=2)
-        columns = range(q.shape[1])
-        q_at, qd_at, qdd_at = (np.stack([np.interp(targets, t, x[:, c]) for c in columns], axis=1) for x in (q, d1, d2))
-    else:
-        half_width = window / 2.0
-        q_at, qd_at, qdd_at = local_polynomial(t, q, targets, half_width, order)
-        if velocity is not None:
-            qd_at, qdd_at, _ = local_polynomial(t, velocity, targets, half_width, order)
-    q_at[exact] = q[index[exact]]
-    if velocity is not None:
-        qd_at[exact] = velocity[index[exact]]
-    return q_at, qd_at, qdd_at
-
-
-def local_polynomial(
-    t: np.ndarray,
-    y: np.ndarray,
-    targets: np.ndarray,
-    half_width: float,
-    order: int,
-    lead: float | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Value, first and second derivative at each target time of a local polynomial fit.
-
-    For each target t*, fits y over the samples with t* + lead - 2 half_width <= t <= t* + lead
-    (centred, |t - t*| <= half_width, when lead is half_width, the default; lead 0 is a causal,
-    one-sided window ending at t*). A window holding fewer than ``order + 1`` samples is widened to
-    the ``order + 1`` samples nearest its centre, and fewer samples in all lower the degree. The fit
-    is least squares in tau = (t - t*) / half_width, vectorised over blocks of targets.
-
-    Args:
-        t: sample times (T,), s, strictly increasing.
-        y: samples (T, n).
-        targets: evaluation times (M,), s.
-        half_width: half the window width, s.
-        order: polynomial degree.
-        lead: how far the window reaches past the target, s, between 0 and 2 half_width.
-
-    Returns:
-        three arrays of shape (M, n).
-    """
-    lead = half_width if lead is None else lead
-    count = len(t)
-    degree = min(order, count - 1)
-    needed = degree + 1
-    lo = np.searchsorted(t, targets - (2.0 * half_width - lead), side="left")
-    hi = np.searchsorted(t, targets + lead, side="right")
-    short = hi - lo < needed
-    if np.any(short):  # too few samples in the window: take the `needed` nearest its centre instead
-        centre = np.searchsorted(t, targets[short] + (lead - half_width))
-        lo[short] = np.clip(centre - needed // 2, 0, count - needed)
-        hi[short] = lo[short] + needed
-    width = int(np.max(hi - lo))
-    value, d1, d2 = (np.empty((len(targets), y.shape[1])) for _ in range(3))
-    for start in range(0, len(targets), _CHUNK):
-        block = slice(start, start + _CHUNK)
-        index = lo[block, None] + np.arange(width)
-        inside = index < hi[block, None]
-        index = np.minimum(index, count - 1)
-        tau = (t[index] - targets[block, None]) / half_width
-        powers = np.empty((len(tau), degree + 1, width))  # tau^0 .. tau^degree per sample, 0 outside
-        powers[:, 0, :] = inside
-        for power in range(1, degree + 1):
-            np.multiply(powers[:, power - 1, :], tau, out=powers[:, power, :])
-        gram = powers @ powers.transpose(0, 2, 1)
-        moments = powers @ y[index]
-        coefficients = np.linalg.solve(gram, moments)  # (M, degree + 1, n)
-        value[block] = coefficients[:, 0]
-        d1[block] = coefficients[:, 1] / half_width
-        d2[block] = 2.0 * coefficients[:, 2] / half_width**2 if degree >= 2 else 0.0
-    return value, d1, d2
-
-
-def _check_settings(method: str, window: float, order: int) -> None:
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    if not (isinstance(window, (int, float)) and np.isfinite(window) and window > 0.0):
-        raise InputError(f"window must be a positive number of seconds, got {window!r}")
-    if not (isinstance(order, (int, np.integer)) and order >= 2):
-        raise InputError(f"order must be an integer of at least 2, got {order!r}")
-
-
-# ---------------------------------------------------------------------------------------------
-# Streaming estimator: one joint-state message at a time.
+from neforward_ros.stamps import NS
 
 MODES = ("causal", "fixed_lag")
 VELOCITY_SOURCES = ("auto", "message", "differentiate")
 DEFAULT_MAX_GAP = 0.5
 """Seconds without a sample after which a joint's history restarts."""
-
-_NS = 1_000_000_000
 
 
 @dataclass(frozen=True)
@@ -283,7 +62,7 @@ class StreamSettings:
     velocity_source: str = "auto"
 
     def __post_init__(self) -> None:
-        _check_settings(self.method, self.window, self.order)
+        check_settings(self.method, self.window, self.order)
         if self.mode not in MODES:
             raise InputError(f"unknown mode {self.mode!r}; choose one of {', '.join(MODES)}")
         if self.velocity_source not in VELOCITY_SOURCES:
@@ -437,9 +216,9 @@ class StreamingEstimator:
         self._lineage = [0] * len(self.joint_names)
         self._lineages = 0
         self._targets = 0
-        self._lag_ns = round(self.settings.effective_lag * _NS)
-        self._gap_ns = round(self.settings.max_gap * _NS)
-        self._keep_ns = round((self.settings.window + self.settings.effective_lag) * _NS) + self._gap_ns
+        self._lag_ns = round(self.settings.effective_lag * NS)
+        self._gap_ns = round(self.settings.max_gap * NS)
+        self._keep_ns = round((self.settings.window + self.settings.effective_lag) * NS) + self._gap_ns
         self._pending: deque[int] = deque()
         self._clock: int | None = None
         self._origin = 0
@@ -487,7 +266,7 @@ class StreamingEstimator:
         """Seconds since each joint's newest sample (at ``now_ns``, default the newest stamp); inf if none."""
         now = self._clock if now_ns is None else now_ns
         return np.array(
-            [(now - h.newest_stamp) / _NS if len(h) and now is not None else np.inf for h in self._histories]
+            [(now - h.newest_stamp) / NS if len(h) and now is not None else np.inf for h in self._histories]
         )
 
     def _update(
@@ -519,7 +298,7 @@ class StreamingEstimator:
             self._log.every(
                 "backwards",
                 logging.WARNING,
-                f"joint state stamps went back in time by {(self._clock - stamp) / _NS:.6f} s "
+                f"joint state stamps went back in time by {(self._clock - stamp) / NS:.6f} s "
                 "(bag loop or clock reset?): estimator histories restarted",
             )
             out.extend(self.flush())
@@ -632,7 +411,7 @@ class StreamingEstimator:
                 restarted = "sample older than the previous one"
                 history.clear()
             elif stamp - newest > self._gap_ns:
-                restarted = f"no sample for {(stamp - newest) / _NS:.3f} s, more than max_gap {self.settings.max_gap} s"
+                restarted = f"no sample for {(stamp - newest) / NS:.3f} s, more than max_gap {self.settings.max_gap} s"
                 history.clear()
             elif self._wrap[j]:
                 previous = history.newest_position
@@ -688,7 +467,7 @@ class StreamingEstimator:
         if k < 0:
             return
         age_ns = target - int(stamps[k])
-        ages[members] = age_ns / _NS
+        ages[members] = age_ns / NS
         if age_ns > self._gap_ns:
             return  # stale: not ready
         data = np.stack([self._histories[j].data for j in members])  # (m, count, 3)
@@ -696,7 +475,7 @@ class StreamingEstimator:
         if exact:  # the sample itself rather than a fit, for what the message gave
             state[members] = data[:, k]  # supplied accelerations (finite) bypass the estimate below
         lead_ns = self._lag_ns if settings.mode == "fixed_lag" else 0
-        lo = int(np.searchsorted(stamps, target + lead_ns - round(settings.window * _NS), side="left"))
+        lo = int(np.searchsorted(stamps, target + lead_ns - round(settings.window * NS), side="left"))
         hi = int(np.searchsorted(stamps, target + lead_ns, side="right"))
         from_velocity = np.all(np.isfinite(data[:, lo:hi, 1]), axis=1) & (hi - lo >= 2)
         needs = ~np.isfinite(state[members, 2])
@@ -707,12 +486,12 @@ class StreamingEstimator:
         estimated = [j for j, need in zip(members, needs, strict=True) if need]
         by_velocity = from_velocity[needs]
         values = np.concatenate([data[needs, :, 0], data[needs][by_velocity, :, 1]]).T  # (count, columns)
-        times = (stamps - self._origin) / _NS
-        target_s = (target - self._origin) / _NS
+        times = (stamps - self._origin) / NS
+        target_s = (target - self._origin) / NS
         if settings.method == "difference":
-            fitted, d1, d2 = _local_difference(times, values, target_s, lead_ns / _NS)
+            fitted, d1, d2 = local_difference(times, values, target_s, lead_ns / NS)
         else:
-            fitted, d1, d2 = _fit_at(times, values, target_s, settings.window / 2.0, settings.order, lead_ns / _NS)
+            fitted, d1, d2 = fit_at(times, values, target_s, settings.window / 2.0, settings.order, lead_ns / NS)
         m = len(estimated)
         velocity_column = m + np.cumsum(by_velocity) - 1
         for column, j in enumerate(estimated):
@@ -725,41 +504,3 @@ class StreamingEstimator:
             if not (exact and np.isfinite(state[j, 1])):  # a message velocity is kept as given
                 state[j, 1] = fitted_velocity
             state[j, 2] = acceleration
-
-
-def _fit_at(
-    times: np.ndarray, values: np.ndarray, target_s: float, half_width: float, order: int, lead: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`local_polynomial` at one target: value, first and second derivative per column.
-
-    The common case (a full window) is solved directly, with the same window and normal equations
-    as :func:`local_polynomial`, at a fraction of its overhead; sparse windows go through it.
-    """
-    lo = int(np.searchsorted(times, target_s - (2.0 * half_width - lead), side="left"))
-    hi = int(np.searchsorted(times, target_s + lead, side="right"))
-    if hi - lo < order + 1 or len(times) < order + 1:
-        fit = local_polynomial(times, values, np.array([target_s]), half_width, order, lead)
-        return fit[0][0], fit[1][0], fit[2][0]
-    tau = (times[lo:hi] - target_s) / half_width
-    basis = tau[:, None] ** np.arange(order + 1)
-    coefficients = np.linalg.solve(basis.T @ basis, basis.T @ values[lo:hi])
-    return coefficients[0], coefficients[1] / half_width, 2.0 * coefficients[2] / half_width**2
-
-
-def _local_difference(
-    times: np.ndarray, values: np.ndarray, target_s: float, lead: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """numpy.gradient applied twice around the sample at or before target_s, on the samples available.
-
-    With two samples on either side this equals the whole-recording ``"difference"`` estimate there.
-    """
-    k = int(np.searchsorted(times, target_s, side="right")) - 1
-    hi = min(len(times), int(np.searchsorted(times, target_s + lead, side="right")), k + 3)
-    lo = max(0, min(k - 2, hi - 5))
-    t, y = times[lo:hi], values[lo:hi]
-    if len(t) < 3:
-        d1 = (y[-1] - y[0]) / (t[-1] - t[0])
-        return y[k - lo], d1, np.full_like(d1, np.nan)
-    first = np.gradient(y, t, axis=0, edge_order=2)
-    second = np.gradient(first, t, axis=0, edge_order=2)
-    return y[k - lo], first[k - lo], second[k - lo]

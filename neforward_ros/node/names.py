@@ -17,9 +17,14 @@ from neforward_ros.errors import InputError
 _TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
+def is_token(text: str) -> bool:
+    """Whether ``text`` can be one token of a ROS 2 name: letters, digits and _, not first a digit."""
+    return _TOKEN.match(text) is not None
+
+
 def _check(name: str, what: str) -> None:
     tokens = [t for t in name.strip("/").split("/") if t != "~"]
-    if name.strip("/") and not all(_TOKEN.match(t) for t in tokens):
+    if name.strip("/") and not all(is_token(t) for t in tokens):
         raise InputError(f"invalid ROS 2 {what} {name!r}: tokens are letters, digits and _, not starting with a digit")
 
 

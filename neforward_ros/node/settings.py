@@ -14,18 +14,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from neforward_ros.derivatives import (
-    DEFAULT_MAX_GAP,
-    DEFAULT_ORDER,
-    DEFAULT_WINDOW,
-    METHODS,
-    MODES,
-    VELOCITY_SOURCES,
-    StreamSettings,
-)
 from neforward_ros.errors import InputError
+from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW, METHODS
+from neforward_ros.estimation.stream import DEFAULT_MAX_GAP, MODES, VELOCITY_SOURCES, StreamSettings
+from neforward_ros.node.ros_args import RosArgs, parse_ros_args
 from neforward_ros.recursion import DEFAULT_GRAVITY
-from neforward_ros.ros_args import RosArgs, parse_ros_args
 
 NODE_NAME = "neforward"
 ACCELERATION_SOURCES = ("estimate", "supplied")

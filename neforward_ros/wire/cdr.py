@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from neforward_ros.errors import InputError
-from neforward_ros.rostypes import PRIMITIVES as _PRIMITIVES
-from neforward_ros.rostypes import typestore
+from neforward_ros.wire.rostypes import PRIMITIVES as _PRIMITIVES
+from neforward_ros.wire.rostypes import typestore
 
 HEADER = b"\x00\x01\x00\x00"  # CDR_LE encapsulation, options 0
 

@@ -4,7 +4,7 @@ Every builder returns the message as nested dicts and lists keyed by the ROS 2 f
 (``{"header": {"stamp": {"sec": ..., "nanosec": ...}, "frame_id": ...}, ...}``), with fields left
 out where the message default is meant. Each runtime turns these into its own message objects:
 the rclpy adapter with ``rosidl_runtime_py.set_message_fields``, the DDS runtime and the bag tool
-through :mod:`neforward_ros.rostypes`. So the rclpy node, the no-ROS node and the bag output carry
+through :mod:`neforward_ros.wire`. So the rclpy node, the no-ROS node and the bag output carry
 the same numbers in the same fields.
 
 Frames and points (see the README topic table):
@@ -20,120 +20,28 @@ accelerometer reads; with gravity set to zero they are kinematic accelerations.
 
 from __future__ import annotations
 
-import math
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
-from neforward_ros.errors import InputError
-
-if TYPE_CHECKING:
-    from neforward_ros.pipeline import Result
+from neforward_ros.node.result import Result
+from neforward_ros.stamps import time_message
 
 Message = dict[str, Any]
-
-LINK_STATES_TYPE = "trajectory_msgs/msg/MultiDOFJointTrajectory"
-ACCEL_TYPE = "geometry_msgs/msg/AccelStamped"
-TWIST_TYPE = "geometry_msgs/msg/TwistStamped"
-IMU_TYPE = "sensor_msgs/msg/Imu"
-MARKERS_TYPE = "visualization_msgs/msg/MarkerArray"
-JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
-JOINT_TRAJECTORY_TYPE = "trajectory_msgs/msg/JointTrajectory"
-STRING_TYPE = "std_msgs/msg/String"
 
 MARKER_NAMESPACE = "com_accel"
 _ARROW = 0  # visualization_msgs/Marker ARROW
 _ADD = 0  # visualization_msgs/Marker ADD
-_NS = 1_000_000_000
-
-
-_INT32 = range(-(2**31), 2**31)
-
-
-def time(stamp_ns: int) -> Message:
-    """builtin_interfaces/Time from integer nanoseconds.
-
-    Raises:
-        InputError: a stamp outside builtin_interfaces/Time's range (int32 seconds).
-    """
-    sec, nanosec = divmod(int(stamp_ns), _NS)
-    if sec not in _INT32:
-        raise InputError(f"stamp {stamp_ns} ns is outside the range of builtin_interfaces/Time (int32 seconds)")
-    return {"sec": sec, "nanosec": nanosec}
-
-
-def stamp_ns(time_message: Any) -> int:
-    """Integer nanoseconds from a builtin_interfaces/Time (an object with sec, nanosec, or its dict)."""
-    if isinstance(time_message, dict):
-        return int(time_message["sec"]) * _NS + int(time_message["nanosec"])
-    return int(time_message.sec) * _NS + int(time_message.nanosec)
 
 
 def header(stamp: int, frame_id: str) -> Message:
-    return {"stamp": time(stamp), "frame_id": frame_id}
+    return {"stamp": time_message(stamp), "frame_id": frame_id}
 
 
 def vector3(v: np.ndarray) -> Message:
     x, y, z = v.tolist()
     return {"x": x, "y": y, "z": z}
-
-
-def quaternions(rotations: np.ndarray) -> np.ndarray:
-    """Unit quaternions (x, y, z, w) with w >= 0 of rotation matrices, shape (..., 3, 3) -> (..., 4).
-
-    Shepperd's method: of the four formulas, each row uses the one whose pivot (4 w^2, 4 x^2, 4 y^2
-    or 4 z^2) is largest, which keeps full precision for every rotation. The tens of links of one
-    sample go through a plain loop, several times faster there; batches are vectorised.
-    """
-    r = np.asarray(rotations, dtype=float)
-    if r.size > 9 * 64:
-        return _quaternions_vectorised(r)
-    out = []
-    for (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) in r.reshape(-1, 3, 3).tolist():
-        trace = r00 + r11 + r22
-        pivot = max(trace, r00, r11, r22)
-        if pivot == trace:
-            s = 2.0 * math.sqrt(max(1.0 + trace, 1e-300))
-            q = ((r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s, 0.25 * s)
-        elif pivot == r00:
-            s = 2.0 * math.sqrt(max(1.0 + r00 - r11 - r22, 1e-300))
-            q = (0.25 * s, (r01 + r10) / s, (r02 + r20) / s, (r21 - r12) / s)
-        elif pivot == r11:
-            s = 2.0 * math.sqrt(max(1.0 + r11 - r00 - r22, 1e-300))
-            q = ((r01 + r10) / s, 0.25 * s, (r12 + r21) / s, (r02 - r20) / s)
-        else:
-            s = 2.0 * math.sqrt(max(1.0 + r22 - r00 - r11, 1e-300))
-            q = ((r02 + r20) / s, (r12 + r21) / s, 0.25 * s, (r10 - r01) / s)
-        norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-        sign = -1.0 if q[3] < 0.0 else 1.0
-        out.append([sign * c / norm for c in q])
-    return np.array(out).reshape(*r.shape[:-2], 4)
-
-
-def _quaternions_vectorised(r: np.ndarray) -> np.ndarray:
-    flat = r.reshape(-1, 3, 3)
-    r00, r01, r02 = flat[:, 0, 0], flat[:, 0, 1], flat[:, 0, 2]
-    r10, r11, r12 = flat[:, 1, 0], flat[:, 1, 1], flat[:, 1, 2]
-    r20, r21, r22 = flat[:, 2, 0], flat[:, 2, 1], flat[:, 2, 2]
-    trace = r00 + r11 + r22
-    best = np.argmax(np.stack([trace, r00, r11, r22]), axis=0)
-    pivot = np.choose(best, (1.0 + trace, 1.0 + 2 * r00 - trace, 1.0 + 2 * r11 - trace, 1.0 + 2 * r22 - trace))
-    s = 2.0 * np.sqrt(np.maximum(pivot, 1e-300))
-    inverse, quarter = 1.0 / s, 0.25 * s
-    d21, d02, d10 = (r21 - r12) * inverse, (r02 - r20) * inverse, (r10 - r01) * inverse
-    s21, s02, s10 = (r21 + r12) * inverse, (r02 + r20) * inverse, (r10 + r01) * inverse
-    q = np.stack(
-        [
-            np.choose(best, (d21, quarter, s10, s02)),
-            np.choose(best, (d02, s10, quarter, s21)),
-            np.choose(best, (d10, s02, s21, quarter)),
-            np.choose(best, (quarter, d21, d02, d10)),
-        ],
-        axis=1,
-    )
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    q[q[:, 3] < 0.0] *= -1.0
-    return q.reshape(*r.shape[:-2], 4)
 
 
 def multi_dof_blocks(
@@ -282,3 +190,22 @@ def markers(result: Result, frame_prefix: str = "", scale: float = 0.02) -> Mess
             }
         )
     return {"markers": out}
+
+
+def per_link_messages(
+    result: Result, accel_links: Sequence[str], imu_links: Sequence[str], frame_prefix: str
+) -> list[tuple[str, dict[str, Any]]]:
+    """(topic, contents) of the per-link outputs of one result, in :func:`output_list` order.
+
+    Links the result's model does not have are left out (the pipeline logs them once).
+    """
+    out: list[tuple[str, dict[str, Any]]] = []
+    for link in accel_links:
+        if link in result.link_names:
+            k = result.link_names.index(link)
+            out.append((f"~/{link}/accel", accel_stamped(result, k, frame_prefix)))
+            out.append((f"~/{link}/twist", twist_stamped(result, k, frame_prefix)))
+    for link in imu_links:
+        if link in result.link_names:
+            out.append((f"~/{link}/imu", imu(result, result.link_names.index(link), frame_prefix)))
+    return out

@@ -9,83 +9,23 @@ Nothing here raises on bad input: it is dropped and logged (throttled).
 from __future__ import annotations
 
 import logging
-import re
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from neforward_ros import messages
-from neforward_ros.derivatives import JointEstimate, StreamingEstimator
 from neforward_ros.errors import ModelError
+from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel, load_model
-from neforward_ros.parameters import NodeSettings
-from neforward_ros.recursion import LinkKinematics, forward_recursion
-
-# Topic names, relative as ROS 2 conventions ask (namespaces and remapping apply).
-JOINT_STATES = "joint_states"
-JOINT_STATES_ACCEL = "joint_states_accel"
-ROBOT_DESCRIPTION = "robot_description"
-LINK_STATES = "~/link_states"
-COM_STATES = "~/com_states"
-MARKERS = "~/markers"
-
-_TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-
-
-@dataclass(frozen=True)
-class Output:
-    """A topic the node publishes: relative name and ROS 2 type (``pkg/msg/Type``)."""
-
-    topic: str
-    type: str
-
-
-@dataclass(frozen=True)
-class Result:
-    """Everything published for one stamp.
-
-    Attributes:
-        stamp_ns: the stamp of the joint state it comes from, integer nanoseconds.
-        link_names, root_link: the model's.
-        in_link: one sample of the recursion, vectors in each link's own frame.
-        in_root: the same vectors along the root frame's axes.
-        com_position_in_root: each link's centre of mass in the root frame, m, (n_links, 3).
-        com_velocity_in_root: velocity of each centre of mass along the root axes, m/s.
-        orientation_in_root: each link frame's orientation in the root frame, unit quaternions
-            (x, y, z, w), (n_links, 4).
-        joints: the joint state it was computed from.
-    """
-
-    stamp_ns: int
-    link_names: tuple[str, ...]
-    root_link: str
-    in_link: LinkKinematics
-    in_root: LinkKinematics
-    com_position_in_root: np.ndarray
-    com_velocity_in_root: np.ndarray
-    orientation_in_root: np.ndarray
-    joints: Any
-
-    def sample(self, index: int) -> Result:
-        """One sample of a batched result (arrays with a leading sample axis)."""
-
-        def pick(kin: LinkKinematics) -> LinkKinematics:
-            fields = ("omega", "alpha", "velocity", "accel", "com_accel", "position", "rotation")
-            return replace(kin, **{name: getattr(kin, name)[index] for name in fields})
-
-        return replace(
-            self,
-            stamp_ns=int(self.stamp_ns[index]),
-            in_link=pick(self.in_link),
-            in_root=pick(self.in_root),
-            com_position_in_root=self.com_position_in_root[index],
-            com_velocity_in_root=self.com_velocity_in_root[index],
-            orientation_in_root=self.orientation_in_root[index],
-            joints=None,
-        )
+from neforward_ros.node import messages
+from neforward_ros.node.messages import per_link_messages
+from neforward_ros.node.names import is_token
+from neforward_ros.node.result import Result, make_result
+from neforward_ros.node.settings import NodeSettings
+from neforward_ros.node.topics import COM_STATES, LINK_STATES, MARKERS, ROBOT_DESCRIPTION, Output, output_list
+from neforward_ros.recursion import forward_recursion
 
 
 @dataclass(frozen=True)
@@ -117,7 +57,7 @@ class Pipeline:
         self.model: RobotModel | None = None
         self._estimator: StreamingEstimator | None = None
         for link in (*settings.accel_links, *settings.imu_links):
-            if not _TOKEN.match(link):
+            if not is_token(link):
                 raise ModelError(f"link {link!r} cannot be part of a ROS 2 topic name (letters, digits, _)")
         if settings.robot_description:
             self.set_model(load_model(settings.robot_description, root_link=settings.root_link), "parameter")
@@ -311,59 +251,3 @@ class Pipeline:
             model, estimate.positions, estimate.velocities, estimate.accelerations, gravity=self.settings.gravity
         )
         return make_result(model, estimate.stamp_ns, in_link, estimate)
-
-
-def output_list(accel_links: Sequence[str], imu_links: Sequence[str], publish_markers: bool) -> list[Output]:
-    """The node's outputs, relative names: link_states, com_states, per-link topics, markers."""
-    out = [Output(LINK_STATES, messages.LINK_STATES_TYPE), Output(COM_STATES, messages.LINK_STATES_TYPE)]
-    for link in accel_links:
-        out += [Output(f"~/{link}/accel", messages.ACCEL_TYPE), Output(f"~/{link}/twist", messages.TWIST_TYPE)]
-    out += [Output(f"~/{link}/imu", messages.IMU_TYPE) for link in imu_links]
-    if publish_markers:
-        out.append(Output(MARKERS, messages.MARKERS_TYPE))
-    return out
-
-
-def per_link_messages(
-    result: Result, accel_links: Sequence[str], imu_links: Sequence[str], frame_prefix: str
-) -> list[tuple[str, dict[str, Any]]]:
-    """(topic, contents) of the per-link outputs of one result, in :func:`output_list` order.
-
-    Links the result's model does not have are left out (the pipeline logs them once).
-    """
-    out: list[tuple[str, dict[str, Any]]] = []
-    for link in accel_links:
-        if link in result.link_names:
-            k = result.link_names.index(link)
-            out.append((f"~/{link}/accel", messages.accel_stamped(result, k, frame_prefix)))
-            out.append((f"~/{link}/twist", messages.twist_stamped(result, k, frame_prefix)))
-    for link in imu_links:
-        if link in result.link_names:
-            out.append((f"~/{link}/imu", messages.imu(result, result.link_names.index(link), frame_prefix)))
-    return out
-
-
-def make_result(model: RobotModel, stamp_ns: Any, in_link: LinkKinematics, joints: Any) -> Result:
-    """A Result from the recursion's output, for one sample or (with a leading sample axis) many.
-
-    Args:
-        model: the robot.
-        stamp_ns: int, or (T,) integer nanoseconds for a batch.
-        in_link: forward_recursion's output (vectors in link frames).
-        joints: the joint states it came from (a JointEstimate, or the batch's arrays).
-    """
-    in_root = in_link.in_root()
-    c = np.asarray(model.com_in_link, dtype=float)
-    com_velocity_in_link = in_link.velocity + np.cross(in_link.omega, c)
-    rotation = in_link.rotation
-    return Result(
-        stamp_ns=stamp_ns,
-        link_names=model.link_names,
-        root_link=model.root_link,
-        in_link=in_link,
-        in_root=in_root,
-        com_position_in_root=in_link.position + (rotation @ c[:, :, None])[..., 0],
-        com_velocity_in_root=np.einsum("...kij,...kj->...ki", rotation, com_velocity_in_link),
-        orientation_in_root=messages.quaternions(rotation),
-        joints=joints,
-    )

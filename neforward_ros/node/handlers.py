@@ -13,10 +13,13 @@ import logging
 import struct
 from collections.abc import Callable
 
-from neforward_ros import cdr, messages
 from neforward_ros.logs import LogFunction, ThrottledLog
-from neforward_ros.pipeline import Pipeline, Result, TrajectoryPoint
-from neforward_ros.rostypes import deserialize
+from neforward_ros.node import topics
+from neforward_ros.node.pipeline import Pipeline, TrajectoryPoint
+from neforward_ros.node.result import Result
+from neforward_ros.stamps import stamp_ns
+from neforward_ros.wire import cdr
+from neforward_ros.wire.rostypes import deserialize
 
 Publish = Callable[[str, bytes], None]
 """``publish(topic, payload)``: the runtime's publisher of the relative topic name, CDR bytes."""
@@ -40,7 +43,7 @@ class MessageHandlers:
         self._publish = publish
         self._log = ThrottledLog(log)
         self._types = {output.topic: output.type for output in pipeline.outputs()}
-        for typename in {*self._types.values(), messages.JOINT_STATE_TYPE}:
+        for typename in {*self._types.values(), topics.JOINT_STATE_TYPE}:
             cdr.warm_up(typename)  # generate the encoders now, not while the first message waits
         self.messages_in = 0
         self.results_out = 0
@@ -60,14 +63,12 @@ class MessageHandlers:
         """A trajectory_msgs/JointTrajectory of supplied states, as CDR bytes."""
         self.messages_in += 1
         try:
-            message = deserialize(messages.JOINT_TRAJECTORY_TYPE, data)
+            message = deserialize(topics.JOINT_TRAJECTORY_TYPE, data)
             points = [
-                TrajectoryPoint(
-                    p["positions"], p["velocities"], p["accelerations"], messages.stamp_ns(p["time_from_start"])
-                )
+                TrajectoryPoint(p["positions"], p["velocities"], p["accelerations"], stamp_ns(p["time_from_start"]))
                 for p in message["points"]
             ]
-            stamp = messages.stamp_ns(message["header"]["stamp"])
+            stamp = stamp_ns(message["header"]["stamp"])
             results = self.pipeline.on_joint_trajectory(stamp, message["joint_names"], points, receive_ns=receive_ns)
         except Exception as exc:
             self._dropped("joint trajectory", exc)
@@ -77,7 +78,7 @@ class MessageHandlers:
     def on_description(self, data: bytes) -> None:
         """A std_msgs/String robot description, as CDR bytes: replaces the model when valid."""
         try:
-            self.pipeline.set_description(deserialize(messages.STRING_TYPE, data)["data"])
+            self.pipeline.set_description(deserialize(topics.STRING_TYPE, data)["data"])
         except Exception as exc:
             self._dropped("robot description", exc)
 

@@ -21,9 +21,11 @@ from pathlib import Path
 
 import numpy as np
 
-from neforward_ros import cdr, messages
 from neforward_ros.errors import NeforwardError
 from neforward_ros.model import RobotModel, load_model
+from neforward_ros.node import topics
+from neforward_ros.stamps import time_message
+from neforward_ros.wire import cdr
 
 STARTUP_TIMEOUT = 30.0
 
@@ -40,8 +42,8 @@ class _Publisher(threading.Thread):
         self.stop = threading.Event()
 
     def run(self) -> None:
-        from neforward_ros.cli import demo_trajectory
         from neforward_ros.dds.types import raw_sample
+        from neforward_ros.demo.robot import demo_trajectory
 
         names = list(self.model.joint_names)
         start = time.monotonic()
@@ -55,8 +57,8 @@ class _Publisher(threading.Thread):
             stamp = time.time_ns()
             # positions at the stamp itself: a late write must not pair old positions with a new stamp
             q, _, _ = demo_trajectory(self.model, np.array([(stamp - first) / 1e9]))
-            contents = {"header": {"stamp": messages.time(stamp)}, "name": names, "position": q[0].tolist()}
-            self.writer.write(raw_sample(messages.JOINT_STATE_TYPE, cdr.encode(messages.JOINT_STATE_TYPE, contents)))
+            contents = {"header": {"stamp": time_message(stamp)}, "name": names, "position": q[0].tolist()}
+            self.writer.write(raw_sample(topics.JOINT_STATE_TYPE, cdr.encode(topics.JOINT_STATE_TYPE, contents)))
             self.sent += 1
 
 
@@ -83,10 +85,10 @@ def live_demo(seconds: float, urdf: str | None, rate: float = 500.0) -> int:
     from cyclonedds.topic import Topic
     from cyclonedds.util import duration
 
-    from neforward_ros.cli import DEFAULT_ROBOT, bundled_config_path
     from neforward_ros.dds.loopback import use_loopback
     from neforward_ros.dds.qos import default_qos
     from neforward_ros.dds.types import RawBytes, dds_type, raw_reader
+    from neforward_ros.resources import DEFAULT_ROBOT, bundled_config_path
 
     path = Path(urdf) if urdf else bundled_config_path(DEFAULT_ROBOT)
     model = load_model(path)
@@ -96,11 +98,11 @@ def live_demo(seconds: float, urdf: str | None, rate: float = 500.0) -> int:
     command += ["--ros-args", "-p", "estimator.mode:=causal"]
     node = subprocess.Popen(command, env=os.environ.copy(), stdout=node_log, stderr=subprocess.STDOUT)
     participant = DomainParticipant(domain)
-    joint_state = messages.JOINT_STATE_TYPE
+    joint_state = topics.JOINT_STATE_TYPE
     writer = DataWriter(
         participant, Topic(participant, "rt/joint_states", dds_type(joint_state)), qos=default_qos(joint_state)
     )
-    link_type = messages.LINK_STATES_TYPE
+    link_type = topics.LINK_STATES_TYPE
     readers = {
         name: raw_reader(participant, f"rt/neforward/{name}", link_type, default_qos(link_type, depth=100))
         for name in ("link_states", "com_states")

@@ -1,0 +1,111 @@
+"""From a recording's joint samples to the node's results: segments, whole-recording estimates,
+and one batched recursion."""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from neforward_ros.bag.options import BagOptions
+from neforward_ros.bag.read import Recording
+from neforward_ros.bag.report import Segment
+from neforward_ros.estimation.batch import estimate_at
+from neforward_ros.node.result import Result, make_result
+from neforward_ros.recursion import forward_recursion
+from neforward_ros.stamps import NS
+
+
+@dataclass
+class Batch:
+    """All outputs of the recording, concatenated over segments."""
+
+    result: Result
+    log_times: np.ndarray
+
+
+def _segments(recording: Recording) -> list[tuple[int, int]]:
+    """Message index ranges [start, stop) within which every joint's stamps increase."""
+    stamps = recording.stamps
+    breaks = set()
+    for rows, _, _ in recording.columns.values():
+        joint_stamps = stamps[rows]
+        backwards = np.nonzero(np.diff(joint_stamps) < 0)[0]
+        breaks.update(int(rows[k + 1]) for k in backwards)
+    edges = [0, *sorted(breaks), len(stamps)]
+    return [(a, b) for a, b in itertools.pairwise(edges) if b > a]
+
+
+def compute(recording: Recording, options: BagOptions, progress: Callable[[str, float], None]) -> Batch:
+    model = recording.model
+    wrap = model.continuous_columns
+    pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+    ranges = _segments(recording)
+    for number, (start, stop) in enumerate(ranges):
+        progress("estimating", number / len(ranges))
+        segment_stamps = recording.stamps[start:stop]
+        segment = Segment(int(segment_stamps.min()), int(segment_stamps.max()), stop - start)
+        recording.report.segments.append(segment)
+        targets, first = np.unique(segment_stamps, return_index=True)
+        origin = int(targets[0])
+        target_s = (targets - origin) / NS
+        state = np.full((3, len(targets), len(model.joint_names)), np.nan)
+        # Each joint's own samples; joints with the same sample times and kind are estimated together.
+        groups: dict[tuple[bytes, bool], list[tuple[int, np.ndarray, np.ndarray]]] = {}
+        for j, (rows, qs, vs) in recording.columns.items():
+            inside = (rows >= start) & (rows < stop) & np.isfinite(qs)
+            t_ns, keep = np.unique(recording.stamps[rows[inside]], return_index=True)
+            if len(t_ns) < 3:
+                segment.note = f"fewer than 3 samples of {model.joint_names[j]}"
+                break
+            q = qs[inside][keep]
+            if wrap[j]:
+                q = np.unwrap(q)
+            v = vs[inside][keep]
+            use_velocity = options.velocity_source != "differentiate" and bool(np.all(np.isfinite(v)))
+            groups.setdefault((t_ns.tobytes(), use_velocity), []).append((j, q, v))
+        if segment.note:
+            segment.skipped = len(targets)
+            continue
+        for (t_bytes, use_velocity), members in groups.items():
+            t = (np.frombuffer(t_bytes, dtype=np.int64) - origin) / NS
+            joints = [j for j, _, _ in members]
+            q_at, qd_at, qdd_at = estimate_at(
+                t,
+                np.stack([q for _, q, _ in members], axis=1),
+                target_s,
+                velocity=np.stack([v for _, _, v in members], axis=1) if use_velocity else None,
+                method=options.method,
+                window=options.window,
+                order=options.order,
+            )
+            stale = _gap_to_samples(t, target_s) > options.max_gap
+            for column, values in enumerate((q_at, qd_at, qdd_at)):
+                values[stale] = np.nan
+                state[column][:, joints] = values
+        if segment.note:
+            segment.skipped = len(targets)
+            continue
+        ok = np.all(np.isfinite(state), axis=(0, 2))
+        segment.skipped = int(np.count_nonzero(~ok))
+        segment.samples_out = int(np.count_nonzero(ok))
+        log_times = recording.log_times[start:stop][first]
+        pieces.append((targets[ok], log_times[ok], state[0][ok], state[1][ok], state[2][ok]))
+    progress("estimating", 1.0)
+    if not pieces:
+        stamps = np.zeros(0, dtype=np.int64)
+        zeros = np.zeros((0, len(model.joint_names)))
+        pieces = [(stamps, stamps, zeros, zeros, zeros)]
+    stamps, log_times, q, qd, qdd = (np.concatenate(parts) for parts in zip(*pieces, strict=True))
+    kinematics = forward_recursion(model, q, qd, qdd, gravity=options.gravity)
+    result = make_result(model, stamps, kinematics, {"positions": q, "velocities": qd, "accelerations": qdd})
+    return Batch(result, log_times)
+
+
+def _gap_to_samples(t: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """Seconds from each target to the nearest sample."""
+    after = np.minimum(np.searchsorted(t, targets), len(t) - 1)
+    before = np.maximum(after - 1, 0)
+    return np.minimum(np.abs(t[after] - targets), np.abs(targets - t[before]))

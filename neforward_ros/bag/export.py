@@ -1,0 +1,93 @@
+"""The results as a CSV table and a PNG plot."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from neforward_ros.model import RobotModel
+from neforward_ros.node.result import Result
+from neforward_ros.stamps import NS
+
+CSV_FIELDS = (
+    ("omega", "rad/s", "root"),
+    ("alpha", "rad/s^2", "root"),
+    ("accel", "m/s^2", "root"),
+    ("com_accel", "m/s^2", "root"),
+)
+
+
+def write_csv(path: Path, result: Result, model: RobotModel) -> None:
+    """One row per sample: stamp, then per link omega, alpha, accel and com_accel (x, y, z).
+
+    The header names each column's link, quantity, frame, component and unit, e.g.
+    ``panda_hand.accel_in_root.z[m/s^2]``: vectors along the root frame's axes. accel and com_accel
+    are specific forces (a - g), as in the node's messages.
+    """
+    root = result.in_root
+    stamps = np.asarray(result.stamp_ns, dtype=np.int64)
+    names = ["stamp_ns", "t[s]"]
+    blocks = []
+    for link_index, link in enumerate(model.link_names):
+        for quantity, unit, frame in CSV_FIELDS:
+            names += [f"{link}.{quantity}_in_{frame}.{axis}[{unit}]" for axis in "xyz"]
+            blocks.append(getattr(root, quantity)[:, link_index, :])
+    values = np.concatenate([((stamps - stamps[0]) / NS)[:, None], *blocks], axis=1)
+    with path.open("w") as stream:
+        stream.write(",".join(names) + "\n")
+        text = np.char.mod("%.9g", values)
+        for stamp, row in zip(stamps.tolist(), text.tolist(), strict=True):
+            stream.write(f"{stamp}," + ",".join(row) + "\n")
+
+
+def write_plot(path: Path, result: Result, model: RobotModel, gravity: tuple[float, float, float]) -> None:
+    """PNG: every link's |a| (kinematic, gravity removed) and |alpha| over time, peaks marked and labelled."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    root = result.in_root
+    stamps = np.asarray(result.stamp_ns, dtype=np.int64)
+    t = (stamps - stamps[0]) / NS
+    accel = np.linalg.norm(root.accel + np.asarray(gravity), axis=-1)
+    alpha = np.linalg.norm(root.alpha, axis=-1)
+    figure, axes = plt.subplots(2, 1, figsize=(13, 8), sharex=True)
+    for axis, values, label in ((axes[0], accel, "|a| [m/s^2]"), (axes[1], alpha, "|alpha| [rad/s^2]")):
+        axis.set_prop_cycle(color=plt.cm.tab20.colors)  # tens of links: more colours than the default 10
+        for k, link in enumerate(model.link_names):
+            if not np.any(values[:, k] > 0):
+                continue
+            line = axis.plot(t, values[:, k], linewidth=0.8, label=link)[0]
+            peak = int(np.argmax(values[:, k]))
+            axis.plot(t[peak], values[peak, k], "o", color=line.get_color(), markersize=4)
+        # Label the three highest distinct peaks; links moving as one (rigidly attached) share one label.
+        labelled: list[tuple[float, float]] = []
+        for k in np.argsort(values.max(axis=0))[::-1]:
+            peak = int(np.argmax(values[:, k]))
+            value = float(values[peak, k])
+            if value <= 0 or len(labelled) == 3:
+                break
+            if any(abs(value - v) <= 1e-9 * max(1.0, v) and t[peak] == at for v, at in labelled):
+                continue
+            same = sum(
+                1 for other in range(values.shape[1]) if other != k and np.allclose(values[:, other], values[:, k])
+            )
+            extra = f" (and {same} more links)" if same else ""
+            axis.annotate(
+                f"{model.link_names[k]}{extra}: {value:.3g} at {t[peak]:.2f} s",
+                (t[peak], value),
+                textcoords="offset points",
+                xytext=(5, 5 + 10 * len(labelled)),
+                fontsize=8,
+            )
+            labelled.append((value, t[peak]))
+        axis.set_ylabel(label)
+        axis.grid(True, alpha=0.3)
+    axes[0].set_title(f"{model.name}: link accelerations (peaks marked)")
+    axes[1].set_xlabel("time since first sample [s]")
+    axes[0].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    figure.tight_layout()
+    figure.savefig(path, format="png", dpi=100)
+    plt.close(figure)

@@ -1,0 +1,49 @@
+"""What ``neforward bag`` computes and writes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from neforward_ros.errors import InputError
+from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW
+from neforward_ros.estimation.stream import DEFAULT_MAX_GAP, VELOCITY_SOURCES
+from neforward_ros.recursion import DEFAULT_GRAVITY
+
+STORAGES = ("mcap", "sqlite3")
+
+
+@dataclass(frozen=True)
+class BagOptions:
+    """What to compute and write; the defaults are the node's.
+
+    Attributes:
+        urdf: URDF file; None takes the model from the recording's robot_description topic.
+        joint_states_topic: None picks the recording's sensor_msgs/JointState topic.
+        storage: output storage, ``mcap`` or ``sqlite3``.
+        accel_links, imu_links: links that also get <link>/accel, <link>/twist and <link>/imu.
+        gravity: m/s^2 in the root frame.
+        method, window, order: the whole-recording estimator's.
+        velocity_source: ``auto`` uses recorded velocities where every sample of a joint has one.
+        max_gap: s; stamps further than this from a joint's samples get no output.
+        frame_prefix: prepended to frame_ids.
+    """
+
+    urdf: str | None = None
+    joint_states_topic: str | None = None
+    storage: str = "mcap"
+    accel_links: tuple[str, ...] = ()
+    imu_links: tuple[str, ...] = ()
+    gravity: tuple[float, float, float] = DEFAULT_GRAVITY
+    method: str = "polyfit"
+    window: float = DEFAULT_WINDOW
+    order: int = DEFAULT_ORDER
+    velocity_source: str = "auto"
+    max_gap: float = DEFAULT_MAX_GAP
+    frame_prefix: str = ""
+
+
+def check_options(options: BagOptions) -> None:
+    if options.storage not in STORAGES:
+        raise InputError(f"unknown storage {options.storage!r}; choose {' or '.join(STORAGES)}")
+    if options.velocity_source not in VELOCITY_SOURCES:
+        raise InputError(f"unknown velocity_source {options.velocity_source!r}")

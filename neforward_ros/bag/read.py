@@ -1,0 +1,150 @@
+"""Reading a rosbag2 recording (sqlite3 or MCAP) with rosbags: the model and every joint's samples."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from neforward_ros.bag.options import BagOptions
+from neforward_ros.bag.report import BagReport
+from neforward_ros.errors import InputError, ModelError
+from neforward_ros.model import RobotModel, load_model
+from neforward_ros.node import topics
+from neforward_ros.wire import cdr
+from neforward_ros.wire.rostypes import typestore
+
+
+@dataclass
+class Recording:
+    model: RobotModel
+    report: BagReport
+    stamps: np.ndarray  # (M,) int64 ns, per message
+    log_times: np.ndarray  # (M,) int64 ns
+    columns: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]  # joint -> (message index, q, v)
+
+
+def read(source: Path, options: BagOptions, progress: Callable[[str, float], None]) -> Recording:
+    from rosbags.rosbag2 import Reader
+
+    try:
+        reader = Reader(source)
+        reader.open()
+    except Exception as exc:  # rosbags raises several kinds of exception for "not a bag"
+        if (source / "metadata.yaml").exists() or source.suffix in (".mcap", ".db3"):
+            raise InputError(f"{source} is truncated or corrupt: {exc}") from exc
+        raise InputError(f"{source} is not a readable rosbag2 recording: {exc}") from exc
+    try:
+        topic = _joint_states_topic(reader, options.joint_states_topic, source)
+        model = _model(reader, options.urdf)
+        connections = [c for c in reader.connections if c.topic == topic]
+        total = max(sum(c.msgcount for c in connections), 1)
+        report = BagReport(joint_states_topic=topic, messages=0)
+        stamps, log_times = [], []
+        names_ids: list[int] = []  # per message: which names tuple
+        positions_list: list[np.ndarray] = []
+        velocities_list: list[np.ndarray] = []
+        name_tuples: dict[tuple[str, ...], int] = {}
+        try:
+            for index, (_, log_time, raw) in enumerate(reader.messages(connections=connections)):
+                stamp, names, positions, velocities = cdr.decode_joint_state(raw)
+                if len(positions) != len(names):
+                    continue  # a malformed message, as the node would drop it
+                if stamp == 0:
+                    stamp = log_time
+                    report.zero_stamps += 1
+                names_ids.append(name_tuples.setdefault(names, len(name_tuples)))
+                positions_list.append(positions)
+                velocities_list.append(velocities)
+                stamps.append(stamp)
+                log_times.append(log_time)
+                if index % 2048 == 0:
+                    progress("reading", index / total)
+        except InputError as exc:
+            raise InputError(f"{source}: corrupt joint state message: {exc}") from exc
+        except Exception as exc:  # truncated or corrupt storage
+            raise InputError(f"{source} is truncated or corrupt: {type(exc).__name__}: {exc}") from exc
+        progress("reading", 1.0)
+    finally:
+        reader.close()
+    report.messages = len(stamps)
+    columns, unknown = _columns(model, name_tuples, np.asarray(names_ids), positions_list, velocities_list)
+    report.ignored_names = sorted(unknown)
+    missing = [model.joint_names[j] for j in range(len(model.joint_names)) if j not in columns]
+    if missing:
+        raise InputError(f"joints of robot {model.name!r} missing from {topic}: {', '.join(missing)}")
+    return Recording(model, report, np.asarray(stamps, dtype=np.int64), np.asarray(log_times, dtype=np.int64), columns)
+
+
+def _columns(
+    model: RobotModel,
+    name_tuples: dict[tuple[str, ...], int],
+    names_ids: np.ndarray,
+    positions: list[np.ndarray],
+    velocities: list[np.ndarray],
+) -> tuple[dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]], set[str]]:
+    """Per model joint: (message indices, positions, velocities or NaN), from messages grouped by names."""
+    known = model.joint_index
+    ignored = set(model.mimic_joint_names)
+    parts: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
+    unknown: set[str] = set()
+    for names, group in name_tuples.items():
+        rows = np.nonzero(names_ids == group)[0]
+        block = np.stack([positions[i] for i in rows])
+        width = len(names)
+        speeds = np.full((len(rows), width), np.nan)
+        with_velocity = [k for k, i in enumerate(rows) if len(velocities[i]) == width]
+        if with_velocity:
+            speeds[with_velocity] = np.stack([velocities[rows[k]] for k in with_velocity])
+        for k, name in enumerate(names):
+            j = known.get(name)
+            if j is None:
+                if name not in ignored:
+                    unknown.add(name)
+                continue
+            parts.setdefault(j, []).append((rows, block[:, k], speeds[:, k]))
+    columns = {}
+    for j, pieces in parts.items():
+        rows, qs, vs = (np.concatenate(x) for x in zip(*pieces, strict=True))
+        order = np.argsort(rows, kind="stable")
+        columns[j] = (rows[order], qs[order], vs[order])
+    return columns, unknown
+
+
+def _joint_states_topic(reader: Any, wanted: str | None, source: Path) -> str:
+    available = {c.topic: c.msgtype for c in reader.connections}
+    listing = ", ".join(f"{name} ({kind})" for name, kind in sorted(available.items())) or "none"
+    if wanted is not None:
+        if available.get(wanted) != topics.JOINT_STATE_TYPE:
+            raise InputError(f"{source} has no {topics.JOINT_STATE_TYPE} topic {wanted}; topics: {listing}")
+        return wanted
+    candidates = sorted(name for name, kind in available.items() if kind == topics.JOINT_STATE_TYPE)
+    if not candidates:
+        raise InputError(f"{source} has no {topics.JOINT_STATE_TYPE} topic; topics: {listing}")
+    if len(candidates) > 1:
+        if "/joint_states" in candidates:
+            return "/joint_states"
+        raise InputError(
+            f"{source} has several joint-state topics ({', '.join(candidates)}); choose one with --joint-states"
+        )
+    return candidates[0]
+
+
+def _model(reader: Any, urdf: str | None) -> RobotModel:
+    if urdf is not None:
+        return load_model(urdf)
+    connections = [
+        c for c in reader.connections if c.msgtype == topics.STRING_TYPE and c.topic.endswith("robot_description")
+    ]
+    text = None
+    for _, _, raw in reader.messages(connections=connections):
+        text = typestore().deserialize_cdr(raw, topics.STRING_TYPE).data
+    if text is None:
+        raise InputError("no --urdf given and no robot_description topic in the recording")
+    try:
+        return load_model(text)
+    except ModelError as exc:
+        raise ModelError(f"the recording's robot_description: {exc}") from exc

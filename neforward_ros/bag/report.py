@@ -1,0 +1,81 @@
+"""What a run of ``neforward bag`` did, said on the terminal: the report and the progress bar."""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+
+from neforward_ros.stamps import NS
+
+
+@dataclass
+class Segment:
+    """A stretch of the recording whose stamps increase; estimated on its own."""
+
+    first_ns: int
+    last_ns: int
+    messages: int
+    samples_out: int = 0
+    skipped: int = 0
+    note: str = ""
+
+
+@dataclass
+class BagReport:
+    """What a run did."""
+
+    joint_states_topic: str
+    messages: int
+    samples_out: int = 0
+    segments: list[Segment] = field(default_factory=list)
+    zero_stamps: int = 0
+    ignored_names: list[str] = field(default_factory=list)
+    topics: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+class Progress:
+    """A progress bar on stderr, drawn only when stderr is a terminal."""
+
+    def __init__(self, enabled: bool | None = None) -> None:
+        self.enabled = sys.stderr.isatty() if enabled is None else enabled
+        self._last = 0.0
+
+    def __call__(self, what: str, fraction: float) -> None:
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if fraction < 1.0 and now - self._last < 0.1:
+            return
+        self._last = now
+        filled = int(30 * min(max(fraction, 0.0), 1.0))
+        sys.stderr.write(f"\r{what:<12} [{'#' * filled}{'.' * (30 - filled)}] {100 * fraction:5.1f}%")
+        if fraction >= 1.0:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def describe(report: BagReport) -> str:
+    """The report as a few lines for the terminal."""
+    lines = [
+        f"{report.messages} joint states from {report.joint_states_topic}; {report.samples_out} samples written "
+        f"to {', '.join(report.topics)} in {report.seconds:.1f} s",
+    ]
+    if len(report.segments) > 1:
+        lines.append(
+            f"{len(report.segments)} segments (stamps went backwards between them), each estimated on its own:"
+        )
+    for number, segment in enumerate(report.segments, 1):
+        span = (segment.last_ns - segment.first_ns) / NS
+        note = (
+            f"; skipped: {segment.note}"
+            if segment.note
+            else (f"; {segment.skipped} stamps without output" if segment.skipped else "")
+        )
+        lines.append(f"  segment {number}: {segment.messages} messages over {span:.3f} s{note}")
+    if report.zero_stamps:
+        lines.append(f"{report.zero_stamps} messages had a zero header.stamp: their recording time was used")
+    if report.ignored_names:
+        lines.append(f"ignored joint names not in the model: {', '.join(report.ignored_names)}")
+    return "\n".join(lines)

@@ -1,0 +1,1 @@
+"""The demos: ``neforward demo`` (the node live over loopback DDS) and ``neforward table``."""

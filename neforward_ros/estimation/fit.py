@@ -1,0 +1,127 @@
+"""Local polynomial fits on irregular stamps: the numerics of every estimator in this package.
+
+Savitzky-Golay smoothing generalised to non-uniform sampling: for a target time t*, a polynomial
+of degree ``order`` in tau = (t - t*) / half_width is fitted by least squares to the samples of a
+window around (or ending at) t*, and its value, first and second derivatives at t* are the
+estimates. ``difference`` is the plain baseline (numpy.gradient twice).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from neforward_ros.errors import InputError
+
+METHODS = ("polyfit", "difference")
+DEFAULT_WINDOW = 0.2
+"""Full width of the local fit, s."""
+DEFAULT_ORDER = 4
+"""Degree of the local polynomial."""
+
+_CHUNK = 4096  # targets per vectorised block: bounds memory at about CHUNK * window samples
+
+
+def local_polynomial(
+    t: np.ndarray,
+    y: np.ndarray,
+    targets: np.ndarray,
+    half_width: float,
+    order: int,
+    lead: float | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Value, first and second derivative at each target time of a local polynomial fit.
+
+    For each target t*, fits y over the samples with t* + lead - 2 half_width <= t <= t* + lead
+    (centred, |t - t*| <= half_width, when lead is half_width, the default; lead 0 is a causal,
+    one-sided window ending at t*). A window holding fewer than ``order + 1`` samples is widened to
+    the ``order + 1`` samples nearest its centre, and fewer samples in all lower the degree. The fit
+    is least squares in tau = (t - t*) / half_width, vectorised over blocks of targets.
+
+    Args:
+        t: sample times (T,), s, strictly increasing.
+        y: samples (T, n).
+        targets: evaluation times (M,), s.
+        half_width: half the window width, s.
+        order: polynomial degree.
+        lead: how far the window reaches past the target, s, between 0 and 2 half_width.
+
+    Returns:
+        three arrays of shape (M, n).
+    """
+    lead = half_width if lead is None else lead
+    count = len(t)
+    degree = min(order, count - 1)
+    needed = degree + 1
+    lo = np.searchsorted(t, targets - (2.0 * half_width - lead), side="left")
+    hi = np.searchsorted(t, targets + lead, side="right")
+    short = hi - lo < needed
+    if np.any(short):  # too few samples in the window: take the `needed` nearest its centre instead
+        centre = np.searchsorted(t, targets[short] + (lead - half_width))
+        lo[short] = np.clip(centre - needed // 2, 0, count - needed)
+        hi[short] = lo[short] + needed
+    width = int(np.max(hi - lo))
+    value, d1, d2 = (np.empty((len(targets), y.shape[1])) for _ in range(3))
+    for start in range(0, len(targets), _CHUNK):
+        block = slice(start, start + _CHUNK)
+        index = lo[block, None] + np.arange(width)
+        inside = index < hi[block, None]
+        index = np.minimum(index, count - 1)
+        tau = (t[index] - targets[block, None]) / half_width
+        powers = np.empty((len(tau), degree + 1, width))  # tau^0 .. tau^degree per sample, 0 outside
+        powers[:, 0, :] = inside
+        for power in range(1, degree + 1):
+            np.multiply(powers[:, power - 1, :], tau, out=powers[:, power, :])
+        gram = powers @ powers.transpose(0, 2, 1)
+        moments = powers @ y[index]
+        coefficients = np.linalg.solve(gram, moments)  # (M, degree + 1, n)
+        value[block] = coefficients[:, 0]
+        d1[block] = coefficients[:, 1] / half_width
+        d2[block] = 2.0 * coefficients[:, 2] / half_width**2 if degree >= 2 else 0.0
+    return value, d1, d2
+
+
+def check_settings(method: str, window: float, order: int) -> None:
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if not (isinstance(window, (int, float)) and np.isfinite(window) and window > 0.0):
+        raise InputError(f"window must be a positive number of seconds, got {window!r}")
+    if not (isinstance(order, (int, np.integer)) and order >= 2):
+        raise InputError(f"order must be an integer of at least 2, got {order!r}")
+
+
+def fit_at(
+    times: np.ndarray, values: np.ndarray, target_s: float, half_width: float, order: int, lead: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`local_polynomial` at one target: value, first and second derivative per column.
+
+    The common case (a full window) is solved directly, with the same window and normal equations
+    as :func:`local_polynomial`, at a fraction of its overhead; sparse windows go through it.
+    """
+    lo = int(np.searchsorted(times, target_s - (2.0 * half_width - lead), side="left"))
+    hi = int(np.searchsorted(times, target_s + lead, side="right"))
+    if hi - lo < order + 1 or len(times) < order + 1:
+        fit = local_polynomial(times, values, np.array([target_s]), half_width, order, lead)
+        return fit[0][0], fit[1][0], fit[2][0]
+    tau = (times[lo:hi] - target_s) / half_width
+    basis = tau[:, None] ** np.arange(order + 1)
+    coefficients = np.linalg.solve(basis.T @ basis, basis.T @ values[lo:hi])
+    return coefficients[0], coefficients[1] / half_width, 2.0 * coefficients[2] / half_width**2
+
+
+def local_difference(
+    times: np.ndarray, values: np.ndarray, target_s: float, lead: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """numpy.gradient applied twice around the sample at or before target_s, on the samples available.
+
+    With two samples on either side this equals the whole-recording ``"difference"`` estimate there.
+    """
+    k = int(np.searchsorted(times, target_s, side="right")) - 1
+    hi = min(len(times), int(np.searchsorted(times, target_s + lead, side="right")), k + 3)
+    lo = max(0, min(k - 2, hi - 5))
+    t, y = times[lo:hi], values[lo:hi]
+    if len(t) < 3:
+        d1 = (y[-1] - y[0]) / (t[-1] - t[0])
+        return y[k - lo], d1, np.full_like(d1, np.nan)
+    first = np.gradient(y, t, axis=0, edge_order=2)
+    second = np.gradient(first, t, axis=0, edge_order=2)
+    return y[k - lo], first[k - lo], second[k - lo]
