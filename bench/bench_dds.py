@@ -1,17 +1,22 @@
-"""End-to-end latency and sustained rate of ``neforward run`` over loopback Cyclone DDS.
+"""Latency and sustained rate of ``neforward run`` over loopback Cyclone DDS, every mode and input kind.
 
-For each robot (the bundled 13-link arm and the 34-link, 33-joint humanoid in test/urdf) and each
-input rate, this script publishes JointState (positions only, stamped with the wall clock at
-writing) for a few seconds to ``neforward run`` (causal mode, so the latency is processing, not the
-estimator's lag) in a separate process, and receives ``/neforward/link_states``. Latency is
-receive time minus input stamp. "Lost" counts inputs without an output (the first two inputs
-never have one: too few samples for an estimate).
+For each robot (the bundled 13-link arm and the 34-link, 33-joint humanoid in test/urdf), each
+estimator mode (default fixed_lag, and causal), each input kind (positions only, and positions with
+velocities, as most drivers send them) and each rate, this script publishes JointState (stamped
+with the wall clock at writing) for a few seconds to ``neforward run`` in a separate process, with
+the node's default settings otherwise, and receives ``/neforward/link_states``.
+
+Latency is receive time minus the stamp of the input that completed the output: the output's own
+input in causal mode; in fixed-lag mode the first input ``lag`` (0.1 s) or more after it, since the
+estimate waits for it. So "latency" is the node's processing and transport, and the configured lag
+comes on top of it. "lost" counts inputs without an output (the first two in causal mode and the
+last ``lag`` of the stream in fixed-lag mode never have one and are not counted).
 
 The floor is measured in the same run: a separate process that echoes each JointState straight
 back on another topic, with no computation. Both use the same publisher and reader code here.
+Prints p50/p99 latency, lost outputs, and the node's p50 above the floor's.
 
-Prints p50/p99 latency, lost outputs, and the node's p50/p99 as a multiple of the floor's.
-Usage: python bench/bench_dds.py [--seconds 3] [--rates 250,500,1000,2000]
+Usage: python bench/bench_dds.py [--seconds 3] [--rates 500,1000,2000] [--modes fixed_lag,causal]
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from __future__ import annotations
 import argparse
 import os
 import signal
+import struct
 import subprocess
 import sys
 import threading
@@ -65,14 +71,15 @@ def echo_server() -> None:
         pass
 
 
-def measure(
-    peer_domain: int, output_topic: str, output_type: str, names: list[str], rate: float, seconds: float, process
-):
-    """Publish at ``rate`` for ``seconds``; return (latencies ms, sent, received)."""
+def measure(peer_domain: int, output_topic: str, output_type: str, names: list[str], rate: float, seconds: float,
+            velocities: bool, process):  # fmt: skip
+    """Publish at ``rate`` for ``seconds``; return (input stamps, [(receive ns, output stamp)])."""
+    from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
     from cyclonedds.domain import DomainParticipant
     from cyclonedds.pub import DataWriter
     from cyclonedds.qos import Policy, Qos
     from cyclonedds.topic import Topic
+    from cyclonedds.util import duration
 
     from neforward_ros.dds.qos import default_qos
     from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
@@ -99,43 +106,58 @@ def measure(
             raise RuntimeError("the process under test did not connect")
         time.sleep(0.05)
     time.sleep(0.5)
-    latencies: list[float] = []
-    received = 0
+    received: list[tuple[int, int]] = []
     done = threading.Event()
 
+    waitset = WaitSet(participant)  # blocks without spinning: the measurement must not steal the CPU it measures
+    waitset.attach(ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any))
+
     def read() -> None:
-        nonlocal received
         while True:
+            waitset.wait(duration(milliseconds=20))
             batch = reader.take(N=512)
             now = time.time_ns()
             for data in batch:
-                if not isinstance(data, RawBytes):
-                    continue
-                received += 1
-                sec, nanosec = np.frombuffer(bytes(data), dtype="<i4", count=2, offset=4)
-                latencies.append((now - (int(sec) * 1_000_000_000 + int(np.uint32(nanosec)))) / 1e6)
-            if not batch:
-                if done.is_set():
-                    return
-                time.sleep(0.0002)
+                if isinstance(data, RawBytes):
+                    sec, nanosec = struct.unpack_from("<iI", data, 4)
+                    received.append((now, sec * 1_000_000_000 + nanosec))
+            if not batch and done.is_set():
+                return
 
     thread = threading.Thread(target=read, daemon=True)
     thread.start()
     count = int(rate * seconds)
-    positions = np.zeros(len(names))
+    frequencies = np.arange(1, len(names) + 1)
+    stamps = []
     start = time.monotonic()
     for k in range(count):
         delay = start + k / rate - time.monotonic()
         if delay > 0:
             time.sleep(delay)
-        positions[:] = 0.3 * np.sin(k / rate * np.arange(1, len(names) + 1))
+        t = k / rate
         stamp = time.time_ns()
-        contents = {"header": {"stamp": time_message(stamp)}, "name": names, "position": positions.tolist()}
+        contents = {
+            "header": {"stamp": time_message(stamp)},
+            "name": names,
+            "position": (0.3 * np.sin(t * frequencies)).tolist(),
+        }
+        if velocities:
+            contents["velocity"] = (0.3 * frequencies * np.cos(t * frequencies)).tolist()
         writer.write(raw_sample(typename, cdr.encode(typename, contents)))
+        stamps.append(stamp)
     time.sleep(1.0)
     done.set()
     thread.join(timeout=5)
-    return latencies, count, received
+    return np.array(stamps, dtype=np.int64), received
+
+
+def latencies(stamps: np.ndarray, received: list[tuple[int, int]], lag_ns: int) -> np.ndarray:
+    """ms from the input that completed each output (the first input at least lag_ns after it)."""
+    if not received:
+        return np.array([np.nan])
+    arrival, output = (np.array(x, dtype=np.int64) for x in zip(*received, strict=True))
+    trigger = stamps[np.minimum(np.searchsorted(stamps, output + lag_ns), len(stamps) - 1)]
+    return (arrival - trigger) / 1e6
 
 
 def start(command: list[str]) -> subprocess.Popen:
@@ -153,7 +175,10 @@ def stop(process: subprocess.Popen) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=3.0)
-    parser.add_argument("--rates", default="250,500,1000,2000")
+    parser.add_argument("--rates", default="500,1000,2000")
+    parser.add_argument("--modes", default="fixed_lag,causal")
+    parser.add_argument("--inputs", default="positions,velocities")
+    parser.add_argument("--robots", default="arm,humanoid")
     parser.add_argument("--echo-server", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.echo_server:
@@ -161,40 +186,51 @@ def main() -> None:
         return
     from neforward_ros import load_model
     from neforward_ros.dds.loopback import use_loopback
+    from neforward_ros.estimation.stream import StreamSettings
     from neforward_ros.node import topics
 
     domain = use_loopback()
     rates = [float(r) for r in args.rates.split(",")]
+    print(f"loopback Cyclone DDS, domain {domain}; {args.seconds:g} s per run; latency from the completing input")
     print(
-        f"loopback Cyclone DDS, domain {domain}; {args.seconds:g} s per rate; latency = output received - input stamp"
-    )
-    print(
-        f"{'robot':<32} {'rate Hz':>8} {'what':>6} {'p50 ms':>8} {'p99 ms':>8} {'lost':>6}"
-        f" {'p50/floor':>10} {'p99/floor':>10}"
+        f"{'robot':<10} {'mode':<10} {'input':<11} {'rate':>6} {'floor p50':>10} {'p99':>6} "
+        f"{'node p50':>9} {'p99':>6} {'above floor':>12} {'lost':>10}"
     )
     for label, path in ROBOTS.items():
+        if not any(wanted in label for wanted in args.robots.split(",")):
+            continue
         names = list(load_model(path).joint_names)
-        for rate in rates:
-            results = {}
-            for what in ("floor", "node"):
-                if what == "floor":
-                    process = start([sys.executable, __file__, "--echo-server"])
-                    topic, typename, expected_loss = "rt/echo", topics.JOINT_STATE_TYPE, 0
-                else:
-                    command = [sys.executable, "-m", "neforward_ros.cli", "run", "--urdf", str(path)]
-                    process = start([*command, "--ros-args", "-p", "estimator.mode:=causal"])
-                    topic, typename, expected_loss = "rt/neforward/link_states", topics.LINK_STATES_TYPE, 2
-                try:
-                    latencies, sent, received = measure(domain, topic, typename, names, rate, args.seconds, process)
-                finally:
-                    stop(process)
-                p50, p99 = np.percentile(latencies, [50, 99]) if latencies else (float("nan"),) * 2
-                results[what] = (p50, p99)
-                lost = sent - expected_loss - received
-                ratio = ""
-                if what == "node":
-                    ratio = f"{p50 / results['floor'][0]:>10.1f} {p99 / results['floor'][1]:>10.1f}"
-                print(f"{label:<32} {rate:>8.0f} {what:>6} {p50:>8.2f} {p99:>8.2f} {lost:>6} {ratio}", flush=True)
+        for mode in args.modes.split(","):
+            lag_s = StreamSettings(mode=mode).effective_lag
+            for kind in args.inputs.split(","):
+                for rate in rates:
+                    results = {}
+                    for what in ("floor", "node"):
+                        if what == "floor":
+                            process = start([sys.executable, __file__, "--echo-server"])
+                            topic, typename = "rt/echo", topics.JOINT_STATE_TYPE
+                        else:
+                            command = [sys.executable, "-m", "neforward_ros.cli", "run", "--urdf", str(path)]
+                            process = start([*command, "--ros-args", "-p", f"estimator.mode:={mode}"])
+                            topic, typename = "rt/neforward/link_states", topics.LINK_STATES_TYPE
+                        try:
+                            stamps, received = measure(
+                                domain, topic, typename, names, rate, args.seconds, kind == "velocities", process
+                            )
+                        finally:
+                            stop(process)
+                        lag_ns = round(lag_s * 1e9) if what == "node" else 0
+                        values = latencies(stamps, received, lag_ns)
+                        expected = len(stamps) if what == "floor" else int(np.sum(stamps <= stamps[-1] - lag_ns))
+                        if what == "node" and mode == "causal":  # the first inputs: too few samples
+                            expected -= 1 if kind == "velocities" else 2
+                        results[what] = (*np.percentile(values, [50, 99]), expected - len(received), expected)
+                    (f50, f99, _, _), (n50, n99, lost, expected) = results["floor"], results["node"]
+                    print(
+                        f"{label.split()[0]:<10} {mode:<10} {kind:<11} {rate:>6.0f} {f50:>10.2f} {f99:>6.2f} "
+                        f"{n50:>9.2f} {n99:>6.2f} {n50 - f50:>12.2f} {f'{lost} of {expected}':>10}",
+                        flush=True,
+                    )
 
 
 if __name__ == "__main__":

@@ -106,15 +106,16 @@ def serialization(arguments: argparse.Namespace) -> None:
     from rclpy.serialization import serialize_message
     from rosidl_runtime_py.set_message import set_message_fields
 
-    from neforward_ros import forward_recursion, load_model
+    from neforward_ros import load_model
     from neforward_ros.node import messages, topics
     from neforward_ros.node.result import make_result
+    from neforward_ros.recursion import kinematics_table, root_state
     from neforward_ros.wire import cdr
 
     model = load_model(arguments.urdf)
     n = len(model.joint_names)
     q = np.linspace(-0.5, 0.5, n)
-    result = make_result(model, 1_700_000_000 * NS, forward_recursion(model, q, q, q), None)
+    result = make_result(model, 1_700_000_000 * NS, kinematics_table(model, q, q, q, root_state()))
 
     def typed() -> bytes:  # set_message_fields consumes its contents: both paths build them anew
         message = MultiDOFJointTrajectory()

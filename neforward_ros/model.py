@@ -38,11 +38,6 @@ class JointKind(enum.Enum):
     CONTINUOUS = "continuous"
     PRISMATIC = "prismatic"
 
-    @property
-    def rotates(self) -> bool:
-        """True for revolute and continuous joints."""
-        return self in (JointKind.REVOLUTE, JointKind.CONTINUOUS)
-
 
 @dataclass(frozen=True, slots=True)
 class ParentJoint:

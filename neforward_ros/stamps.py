@@ -19,8 +19,8 @@ NS = 1_000_000_000
 _INT32 = range(-(2**31), 2**31)
 
 
-def time_message(stamp_ns: int) -> dict[str, int]:
-    """builtin_interfaces/Time contents from integer nanoseconds.
+def split_stamp(stamp_ns: int) -> tuple[int, int]:
+    """(sec, nanosec) of builtin_interfaces/Time from integer nanoseconds.
 
     Raises:
         InputError: a stamp outside builtin_interfaces/Time's range (int32 seconds).
@@ -28,6 +28,12 @@ def time_message(stamp_ns: int) -> dict[str, int]:
     sec, nanosec = divmod(int(stamp_ns), NS)
     if sec not in _INT32:
         raise InputError(f"stamp {stamp_ns} ns is outside the range of builtin_interfaces/Time (int32 seconds)")
+    return sec, nanosec
+
+
+def time_message(stamp_ns: int) -> dict[str, int]:
+    """builtin_interfaces/Time contents from integer nanoseconds (see :func:`split_stamp`)."""
+    sec, nanosec = split_stamp(stamp_ns)
     return {"sec": sec, "nanosec": nanosec}
 
 

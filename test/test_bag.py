@@ -108,25 +108,26 @@ def test_outputs_match_pinocchio_on_the_analytic_trajectory(tmp_path, storage, v
 
 def test_batched_messages_equal_the_node_message_building(tmp_path) -> None:
     """The bag's vectorised encoding gives the same bytes as the node's per-message path."""
-    from neforward_ros import forward_recursion, load_model
+    from neforward_ros import load_model
     from neforward_ros.node.result import make_result
+    from neforward_ros.recursion import kinematics_table, root_state
 
     model = load_model(PANDA)
     t = np.linspace(0.0, 1.0, 7)
     q, qd, qdd = trajectory(t)
     stamps = EPOCH + np.round(t * 1e9).astype(np.int64)
-    batch = make_result(model, stamps, forward_recursion(model, q, qd, qdd), None)
+    batch = make_result(model, stamps, kinematics_table(model, q, qd, qdd, root_state()))
     for builder, blocks in (
         (messages.link_states, messages.link_states_blocks),
         (messages.com_states, messages.com_states_blocks),
     ):
         template = cdr.encode(topics.LINK_STATES_TYPE, builder(batch.sample(0), "p/"))
-        rows = cdr.patch_multi_dof(template, stamps, *blocks(batch))
+        rows = cdr.MultiDofTemplate(template).encode_many(stamps, *blocks(batch))
         for i in range(len(t)):
             # byte for byte what the per-message path encodes from the same numbers
             assert rows[i].tobytes() == cdr.encode(topics.LINK_STATES_TYPE, builder(batch.sample(i), "p/"))
             # and the same numbers as the node's single-sample computation, to rounding
-            single = make_result(model, int(stamps[i]), forward_recursion(model, q[i], qd[i], qdd[i]), None)
+            single = make_result(model, int(stamps[i]), kinematics_table(model, q[i], qd[i], qdd[i], root_state()))
             a = cdr.decode_multi_dof(rows[i].tobytes())
             b = cdr.decode_multi_dof(cdr.encode(topics.LINK_STATES_TYPE, builder(single, "p/")))
             assert a.stamp_ns == b.stamp_ns and a.joint_names == b.joint_names

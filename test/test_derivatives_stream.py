@@ -143,16 +143,6 @@ def test_message_source_without_velocities_differentiates_and_says_so_once() -> 
     assert relative_rms(qdd[60:], qdd_true[60:]) <= 5e-3
 
 
-def test_supplied_accelerations_bypass_estimation() -> None:
-    estimator = StreamingEstimator(["a"], settings=StreamSettings(mode="causal"))
-    out = []
-    for k in range(5):  # values that are not derivatives of each other: estimation would change them
-        out += estimator.update(EPOCH_NS + k * 2_000_000, ["a"], [0.1 * k], [7.0], [-3.0 - k])
-    for k, estimate in enumerate(out):
-        assert estimate.ready[0]
-        assert (estimate.positions[0], estimate.velocities[0], estimate.accelerations[0]) == (0.1 * k, 7.0, -3.0 - k)
-
-
 def test_continuous_joint_is_unwrapped_across_pi() -> None:
     t = jittered_stamps(1000)
     angle = 3.0 + 6.0 * t + 0.3 * np.sin(4.0 * t)  # turns about once a second

@@ -14,7 +14,7 @@ from neforward_ros.bag.read import Recording
 from neforward_ros.bag.report import Segment
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.node.result import Result, make_result
-from neforward_ros.recursion import forward_recursion
+from neforward_ros.recursion import kinematics_table, root_state
 from neforward_ros.stamps import NS
 
 
@@ -85,9 +85,6 @@ def compute(recording: Recording, options: BagOptions, progress: Callable[[str, 
             for column, values in enumerate((q_at, qd_at, qdd_at)):
                 values[stale] = np.nan
                 state[column][:, joints] = values
-        if segment.note:
-            segment.skipped = len(targets)
-            continue
         ok = np.all(np.isfinite(state), axis=(0, 2))
         segment.skipped = int(np.count_nonzero(~ok))
         segment.samples_out = int(np.count_nonzero(ok))
@@ -99,8 +96,7 @@ def compute(recording: Recording, options: BagOptions, progress: Callable[[str, 
         zeros = np.zeros((0, len(model.joint_names)))
         pieces = [(stamps, stamps, zeros, zeros, zeros)]
     stamps, log_times, q, qd, qdd = (np.concatenate(parts) for parts in zip(*pieces, strict=True))
-    kinematics = forward_recursion(model, q, qd, qdd, gravity=options.gravity)
-    result = make_result(model, stamps, kinematics, {"positions": q, "velocities": qd, "accelerations": qdd})
+    result = make_result(model, stamps, kinematics_table(model, q, qd, qdd, root_state(options.gravity)))
     return Batch(result, log_times)
 
 

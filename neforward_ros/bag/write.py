@@ -40,7 +40,7 @@ def write_bag(output: Path, batch: Batch, options: BagOptions, progress: Callabl
         (COM_STATES, messages.com_states, messages.com_states_blocks),
     ):
         template = cdr.encode(topics.LINK_STATES_TYPE, builder(first, prefix))
-        rows[names.resolve(topic)] = cdr.patch_multi_dof(template, result.stamp_ns, *blocks(result))
+        rows[names.resolve(topic)] = cdr.MultiDofTemplate(template).encode_many(result.stamp_ns, *blocks(result))
     per_link = bool(options.accel_links or options.imu_links)
     storage = StoragePlugin.MCAP if options.storage == "mcap" else StoragePlugin.SQLITE3
     # Written inside a temporary folder under its final name (rosbag2 names the storage file after

@@ -97,14 +97,24 @@ def fit_at(
     The common case (a full window) is solved directly, with the same window and normal equations
     as :func:`local_polynomial`, at a fraction of its overhead; sparse windows go through it.
     """
-    lo = int(np.searchsorted(times, target_s - (2.0 * half_width - lead), side="left"))
-    hi = int(np.searchsorted(times, target_s + lead, side="right"))
+    lo = int(times.searchsorted(target_s - (2.0 * half_width - lead), side="left"))
+    hi = int(times.searchsorted(target_s + lead, side="right"))
     if hi - lo < order + 1 or len(times) < order + 1:
         fit = local_polynomial(times, values, np.array([target_s]), half_width, order, lead)
         return fit[0][0], fit[1][0], fit[2][0]
-    tau = (times[lo:hi] - target_s) / half_width
-    basis = tau[:, None] ** np.arange(order + 1)
-    coefficients = np.linalg.solve(basis.T @ basis, basis.T @ values[lo:hi])
+    if hi - lo < len(times):
+        times, values = times[lo:hi], values[lo:hi]
+    return fit_window(times, values, target_s, half_width, order)
+
+
+def fit_window(
+    times: np.ndarray, values: np.ndarray, target_s: float, half_width: float, order: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The fit of :func:`fit_at` on exactly the samples given (at least order + 1 of them)."""
+    tau = (times - target_s) / half_width
+    basis = np.vander(tau, order + 1, increasing=True)  # powers by repeated products, as local_polynomial
+    transposed = basis.T
+    coefficients = np.linalg.solve(transposed @ basis, transposed @ values)
     return coefficients[0], coefficients[1] / half_width, 2.0 * coefficients[2] / half_width**2
 
 
@@ -120,6 +130,8 @@ def local_difference(
     lo = max(0, min(k - 2, hi - 5))
     t, y = times[lo:hi], values[lo:hi]
     if len(t) < 3:
+        if len(t) < 2:  # one sample: nothing to differentiate
+            return y[k - lo], np.full_like(y[0], np.nan), np.full_like(y[0], np.nan)
         d1 = (y[-1] - y[0]) / (t[-1] - t[0])
         return y[k - lo], d1, np.full_like(d1, np.nan)
     first = np.gradient(y, t, axis=0, edge_order=2)

@@ -50,7 +50,7 @@ class StreamSettings:
         velocity_source: ``"auto"`` uses the message's velocities where they are present and
             differentiates positions elsewhere; ``"message"`` expects them (and warns once per
             joint that lacks them); ``"differentiate"`` ignores them. Accelerations are the
-            derivative of whichever velocity is used. Supplied accelerations bypass estimation.
+            derivative of whichever velocity is used.
     """
 
     method: str = "polyfit"
@@ -113,16 +113,39 @@ class JointEstimate:
         return bool(np.all(self.ready))
 
 
-class _History:
-    """One joint's samples since its last restart: stamps (ns), positions, velocities, accelerations."""
+class _Group:
+    """Joints that have received exactly the same stamps since their histories last restarted (one
+    driver's joints): their samples share one buffer and are fitted together.
 
-    __slots__ = ("_data", "_stamps", "end", "start")
+    Attributes:
+        joints: the joints' indices in the estimator, in the order of the buffer's columns.
+        origin: the segment's first stamp; ``seconds`` are counted from it.
+    """
 
-    def __init__(self, capacity: int = 256) -> None:
+    __slots__ = (
+        "_positions",
+        "_seconds",
+        "_stamps",
+        "_velocities",
+        "end",
+        "joints",
+        "last_without_velocity",
+        "origin",
+        "slots",
+        "start",
+    )
+
+    def __init__(self, joints: list[int], origin: int, capacity: int = 256) -> None:
+        self.joints = joints
+        self.slots = {j: k for k, j in enumerate(joints)}
+        self.origin = origin
         self._stamps = np.empty(capacity, dtype=np.int64)
-        self._data = np.empty((capacity, 3))
+        self._seconds = np.empty(capacity)
+        self._positions = np.empty((capacity, len(joints)))
+        self._velocities = np.empty((capacity, len(joints)))
         self.start = 0
         self.end = 0
+        self.last_without_velocity = -1  # buffer index of the newest sample that had no velocity at all
 
     def __len__(self) -> int:
         return self.end - self.start
@@ -132,55 +155,99 @@ class _History:
         return self._stamps[self.start : self.end]
 
     @property
-    def data(self) -> np.ndarray:
-        """(count, 3): position, velocity (NaN if not given), acceleration (NaN if not given)."""
-        return self._data[self.start : self.end]
+    def seconds(self) -> np.ndarray:
+        """The stamps as seconds since the segment's first stamp."""
+        return self._seconds[self.start : self.end]
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(count, joints)."""
+        return self._positions[self.start : self.end]
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(count, joints), NaN where a message gave none."""
+        return self._velocities[self.start : self.end]
+
+    def velocities_everywhere_after(self, index: int) -> bool:
+        """Whether every sample from ``index`` (in the views above) on has some velocity."""
+        return self.last_without_velocity < self.start + index
 
     @property
     def newest_stamp(self) -> int:
         return int(self._stamps[self.end - 1])
 
-    @property
-    def newest_position(self) -> float:
-        return float(self._data[self.end - 1, 0])
+    def newest_position(self, joint: int) -> float:
+        return float(self._positions[self.end - 1, self.slots[joint]])
 
-    def clear(self) -> None:
-        self.start = self.end = 0
-
-    def append(self, stamp_ns: int, position: float, velocity: float, acceleration: float) -> None:
+    def append(self, stamp_ns: int, positions: list[float], velocities: list[float]) -> None:
         if self.end == len(self._stamps):
             count = len(self)
+            arrays = ("_stamps", "_seconds", "_positions", "_velocities")
             if count > len(self._stamps) // 2:
-                self._stamps = np.concatenate([self._stamps, np.empty_like(self._stamps)])
-                self._data = np.concatenate([self._data, np.empty_like(self._data)])
-            self._stamps[:count] = self._stamps[self.start : self.end]
-            self._data[:count] = self._data[self.start : self.end]
+                for name in arrays:
+                    old = getattr(self, name)
+                    setattr(self, name, np.concatenate([old, np.empty_like(old)]))
+            for name in arrays:
+                array = getattr(self, name)
+                array[:count] = array[self.start : self.end]
+            self.last_without_velocity -= self.start
             self.start, self.end = 0, count
-        self._stamps[self.end] = stamp_ns
-        self._data[self.end] = (position, velocity, acceleration)
-        self.end += 1
+        end = self.end
+        self._stamps[end] = stamp_ns
+        self._seconds[end] = (stamp_ns - self.origin) / NS
+        self._positions[end] = positions
+        self._velocities[end] = velocities
+        if all(v != v for v in velocities):  # all NaN
+            self.last_without_velocity = end
+        self.end = end + 1
 
     def drop_before(self, stamp_ns: int, keep: int) -> None:
         """Forget samples older than stamp_ns, keeping at least the newest ``keep``."""
         first = self.start + int(np.searchsorted(self.stamps, stamp_ns, side="left"))
         self.start = min(first, max(self.start, self.end - keep))
 
+    def split(self, joints: list[int]) -> _Group:
+        """Move these joints, with their history, into a group of their own; returns it."""
+        moved = _Group(joints, self.origin, capacity=max(len(self._stamps), 16))
+        columns = [self.slots[j] for j in joints]
+        count = len(self)
+        moved._stamps[:count] = self.stamps
+        moved._seconds[:count] = self.seconds
+        moved._positions[:count] = self.positions[:, columns]
+        moved._velocities[:count] = self.velocities[:, columns]
+        moved.end = count
+        # -1 claims nothing: the velocities of its first windows are checked sample by sample
+        moved.last_without_velocity = -1
+        self.remove(joints)
+        return moved
+
+    def remove(self, joints: list[int]) -> None:
+        """Forget these joints."""
+        keep = [j for j in self.joints if j not in joints]
+        columns = [self.slots[j] for j in keep]
+        self._positions = self._positions[:, columns].copy()
+        self._velocities = self._velocities[:, columns].copy()
+        self.joints = keep
+        self.slots = {j: k for k, j in enumerate(keep)}
+
 
 class StreamingEstimator:
     """Joint velocities and accelerations from joint-state messages, one message at a time.
 
     Each joint keeps its own history, so partial messages (arm and gripper from different
-    drivers) are fine. Every call to :meth:`update` returns the estimates that became available
-    with that message: in causal mode, one for the message's stamp (when it is newer than any
-    before); in fixed-lag mode, one for every earlier message stamp that is now ``lag`` old.
+    drivers) are fine: joints that always arrive together share a buffer and one fit. Every call
+    to :meth:`update` returns the estimates that became available with that message: in causal
+    mode, one for the message's stamp (when it is newer than any before); in fixed-lag mode, one
+    for every earlier message stamp that is now ``lag`` old.
 
     Bad input never raises out of :meth:`update`; it is dropped and logged (throttled):
-    names/positions of different lengths reject the message; velocities or accelerations of the
-    wrong length, or NaN/inf entries, drop that field; a NaN/inf position drops that joint's sample;
-    unknown names are ignored with one warning per name; a repeated stamp is skipped; a stamp going
-    backwards restarts the histories (one log line) and starts a new segment; a gap longer than
-    max_gap restarts that joint's history; a zero stamp is replaced by the receive time given by the
-    caller (logged once).
+    names/positions of different lengths reject the message; velocities of the wrong length, or
+    NaN/inf entries, drop that field; a NaN/inf position drops that joint's sample; unknown names
+    are ignored with one warning per name; a repeated stamp is skipped; a stamp going backwards
+    restarts the histories (one log line) and starts a new segment; a gap longer than max_gap
+    restarts that joint's history; a zero stamp is replaced by the receive time given by the caller
+    (logged once).
 
     Args:
         joint_names: the joints to estimate, in output order.
@@ -210,14 +277,14 @@ class StreamingEstimator:
             raise InputError(f"wrap has {len(self._wrap)} entries for {len(self.joint_names)} joints")
         self._ignored = frozenset(ignored_names)
         self._log = ThrottledLog(log)
-        self._histories = [_History() for _ in self.joint_names]
-        # Joints with the same lineage have received exactly the same stamps since their histories
-        # last restarted (one driver's joints), so they are fitted together. 0: empty history.
-        self._lineage = [0] * len(self.joint_names)
-        self._lineages = 0
+        self._last_names: tuple[str, ...] | None = None
+        self._last_indices: list[tuple[int, int]] = []
+        self._groups: list[_Group] = []
+        self._group_of: list[_Group | None] = [None] * len(self.joint_names)
         self._targets = 0
         self._lag_ns = round(self.settings.effective_lag * NS)
         self._gap_ns = round(self.settings.max_gap * NS)
+        self._window_ns = round(self.settings.window * NS)
         self._keep_ns = round((self.settings.window + self.settings.effective_lag) * NS) + self._gap_ns
         self._pending: deque[int] = deque()
         self._clock: int | None = None
@@ -232,7 +299,6 @@ class StreamingEstimator:
         names: Sequence[str],
         positions: Sequence[float],
         velocities: Sequence[float] = (),
-        accelerations: Sequence[float] = (),
         *,
         receive_ns: int | None = None,
     ) -> list[JointEstimate]:
@@ -240,12 +306,11 @@ class StreamingEstimator:
 
         Args:
             stamp_ns: header stamp, integer nanoseconds; 0 means "not set".
-            names, positions, velocities, accelerations: the message's fields (the last two may
-                be empty).
+            names, positions, velocities: the message's fields (velocities may be empty).
             receive_ns: receive time, used when stamp_ns is 0.
         """
         try:
-            return self._update(int(stamp_ns), names, positions, velocities, accelerations, receive_ns)
+            return self._update(int(stamp_ns), names, positions, velocities, receive_ns)
         except Exception as exc:
             self._log.every("internal", logging.ERROR, f"joint state dropped: {type(exc).__name__}: {exc}")
             return []
@@ -256,9 +321,8 @@ class StreamingEstimator:
 
     def reset(self) -> None:
         """Forget every history (a new stream starts)."""
-        for history in self._histories:
-            history.clear()
-        self._lineage = [0] * len(self.joint_names)
+        self._groups = []
+        self._group_of = [None] * len(self.joint_names)
         self._pending.clear()
         self._clock = None
 
@@ -266,7 +330,7 @@ class StreamingEstimator:
         """Seconds since each joint's newest sample (at ``now_ns``, default the newest stamp); inf if none."""
         now = self._clock if now_ns is None else now_ns
         return np.array(
-            [(now - h.newest_stamp) / NS if len(h) and now is not None else np.inf for h in self._histories]
+            [(now - g.newest_stamp) / NS if g is not None and now is not None else np.inf for g in self._group_of]
         )
 
     def _update(
@@ -275,7 +339,6 @@ class StreamingEstimator:
         names: Sequence[str],
         positions: Sequence[float],
         velocities: Sequence[float],
-        accelerations: Sequence[float],
         receive_ns: int | None,
     ) -> list[JointEstimate]:
         if stamp <= 0:
@@ -286,14 +349,14 @@ class StreamingEstimator:
                 "zero-stamp", logging.WARNING, "joint states carry a zero header.stamp; using the receive time instead"
             )
             stamp = int(receive_ns)
-        samples = self._read_message(names, positions, velocities, accelerations)
+        samples = self._read_message(names, positions, velocities)
         if samples is None:
             return []
         out: list[JointEstimate] = []
         if (
             self._clock is not None
             and stamp < self._clock
-            and any(len(self._histories[j]) and stamp < self._histories[j].newest_stamp for j, *_ in samples)
+            and any(self._group_of[j] is not None and stamp < self._group_of[j].newest_stamp for j, _, _ in samples)
         ):
             self._log.every(
                 "backwards",
@@ -310,43 +373,22 @@ class StreamingEstimator:
             new_target = True
         else:
             new_target = stamp > self._clock
-        added = False
-        restarted: list[str] = []
-        successors: dict[int, int] = {}
-        for j, position, velocity, acceleration in samples:
-            result = self._add(j, stamp, position, velocity, acceleration)
-            if result is None:
-                continue
-            added = True
-            if result:
-                restarted.append(f"{self.joint_names[j]!r} ({result})")
-            before = -1 if result else self._lineage[j]  # -1: restarted in this message
-            if before not in successors:
-                self._lineages += 1
-                successors[before] = self._lineages
-            self._lineage[j] = successors[before]
-        if restarted:
-            self._log.every("restart", logging.WARNING, f"history restarted for joint {', '.join(restarted)}")
-        if not added:
+        if not self._add(stamp, samples):
             return out
         if new_target:
             self._clock = stamp
             self._pending.append(stamp)
             out.extend(self._estimate(target) for target in self._drain(stamp - self._lag_ns))
             self._targets += 1
-            if self._targets % 32 == 0:  # forget old samples now and then; joints of one lineage alike
-                for history in self._histories:
-                    history.drop_before(stamp - self._keep_ns, self.settings.order + 2)
+            if self._targets % 32 == 0:  # forget old samples now and then
+                for group in self._groups:
+                    group.drop_before(stamp - self._keep_ns, self.settings.order + 2)
         return out
 
     def _read_message(
-        self,
-        names: Sequence[str],
-        positions: Sequence[float],
-        velocities: Sequence[float],
-        accelerations: Sequence[float],
-    ) -> list[tuple[int, float, float, float]] | None:
-        """The message's usable samples as (joint index, position, velocity, acceleration); None rejects it."""
+        self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float]
+    ) -> list[tuple[int, float, float]] | None:
+        """The message's usable samples as (joint index, position, velocity or NaN); None rejects it."""
         count = len(names)
         if len(positions) != count:
             self._log.every(
@@ -356,35 +398,42 @@ class StreamingEstimator:
         position = self._floats(positions, "positions", count)
         if position is None:
             return None
-        given = np.full((count, 2), np.nan)
-        for column, (values, what) in enumerate(((velocities, "velocities"), (accelerations, "accelerations"))):
-            field = self._floats(values, what, count)
-            if field is None:
-                continue
-            if not np.all(np.isfinite(field)):
-                self._log.every(("nan", what), logging.WARNING, f"joint state with non-finite {what}: those dropped")
-            given[:, column] = field
-        given[~np.isfinite(given)] = np.nan
-        if self.settings.velocity_source == "differentiate":
-            given[:, 0] = np.nan
-        velocity, acceleration = given.T.tolist()
-        position = position.tolist()
+        velocity = self._floats(velocities, "velocities", count)
+        if velocity is None or self.settings.velocity_source == "differentiate":
+            velocity = [math.nan] * count
+        elif not all(math.isfinite(v) for v in velocity):
+            self._log.every(("nan", "velocities"), logging.WARNING, "joint state with non-finite velocities: dropped")
+            velocity = [v if math.isfinite(v) else math.nan for v in velocity]
+        indices = self._indices(names)
+        if math.isfinite(sum(position)):  # the usual case: every position is a number (inf - inf is NaN)
+            return [(j, position[k], velocity[k]) for k, j in indices]
         samples = []
-        for k, name in enumerate(names):
-            j = self._index.get(name)
-            if j is None:
-                if name not in self._ignored:
+        for k, j in indices:
+            if not math.isfinite(position[k]):
+                name = self.joint_names[j]
+                self._log.every(("nan", name), logging.WARNING, f"joint {name!r}: non-finite position, sample dropped")
+                continue
+            samples.append((j, position[k], velocity[k]))
+        return samples
+
+    def _indices(self, names: Sequence[str]) -> list[tuple[int, int]]:
+        """(position in the message, joint index) of the names this estimator knows; unknown names
+        warned about once each. Kept for the last names seen: a driver sends the same ones."""
+        key = tuple(names)
+        if key != self._last_names:
+            indices = []
+            for k, name in enumerate(key):
+                j = self._index.get(name)
+                if j is not None:
+                    indices.append((k, j))
+                elif name not in self._ignored:
                     self._log.once(
                         ("unknown", name), logging.WARNING, f"joint state names unknown joint {name!r}, ignored"
                     )
-                continue
-            if not math.isfinite(position[k]):
-                self._log.every(("nan", name), logging.WARNING, f"joint {name!r}: non-finite position, sample dropped")
-                continue
-            samples.append((j, position[k], velocity[k], acceleration[k]))
-        return samples
+            self._last_names, self._last_indices = key, indices
+        return self._last_indices
 
-    def _floats(self, values: Sequence[float], what: str, count: int) -> np.ndarray | None:
+    def _floats(self, values: Sequence[float], what: str, count: int) -> list[float] | None:
         """A message field as floats; None (logged) when it is empty, of the wrong length or not numbers."""
         if len(values) == 0:
             return None
@@ -394,36 +443,75 @@ class StreamingEstimator:
             )
             return None
         try:
-            return np.asarray(values, dtype=float).reshape(count)
+            if isinstance(values, np.ndarray) and values.dtype.kind == "f":
+                return values.tolist()
+            return [float(v) for v in values]
         except (TypeError, ValueError):
             self._log.every(("type", what), logging.WARNING, f"joint state {what} are not numbers: ignored")
             return None
 
-    def _add(self, j: int, stamp: int, position: float, velocity: float, acceleration: float) -> str | None:
-        """Append one sample. Returns None for a duplicate (skipped), else why the history restarted, or ''."""
-        history = self._histories[j]
-        restarted = ""
-        if len(history):
-            newest = history.newest_stamp
-            if stamp == newest:
-                return None
-            if stamp < newest:
-                restarted = "sample older than the previous one"
-                history.clear()
-            elif stamp - newest > self._gap_ns:
-                restarted = f"no sample for {(stamp - newest) / NS:.3f} s, more than max_gap {self.settings.max_gap} s"
-                history.clear()
-            elif self._wrap[j]:
-                previous = history.newest_position
-                position = previous + (position - previous + np.pi) % (2.0 * np.pi) - np.pi
-        if self.settings.velocity_source == "message" and np.isnan(velocity) and np.isnan(acceleration):
-            self._log.once(
-                ("no-velocity", j),
-                logging.WARNING,
-                f"velocity_source is 'message' but joint {self.joint_names[j]!r} has no velocity: differentiating",
-            )
-        history.append(stamp, position, velocity, acceleration)
-        return restarted
+    def _add(self, stamp: int, samples: list[tuple[int, float, float]]) -> bool:
+        """Append one message's samples to their groups; returns whether any was added.
+
+        A repeated stamp is skipped. A joint whose previous sample is newer, or more than max_gap
+        older, restarts its history. Joints of a group that arrive without the rest of it move,
+        with their history, into a group of their own.
+        """
+        by_group: dict[int, tuple[_Group, dict[int, tuple[float, float]]]] = {}
+        fresh: dict[int, tuple[float, float]] = {}
+        restarted: list[str] = []
+        for j, position, velocity in samples:
+            group = self._group_of[j]
+            if self.settings.velocity_source == "message" and math.isnan(velocity):
+                self._log.once(
+                    ("no-velocity", j),
+                    logging.WARNING,
+                    f"velocity_source is 'message' but joint {self.joint_names[j]!r} has no velocity: differentiating",
+                )
+            if group is not None:
+                newest = group.newest_stamp
+                if stamp == newest:
+                    continue
+                if stamp < newest:
+                    reason = "sample older than the previous one"
+                elif stamp - newest > self._gap_ns:
+                    reason = f"no sample for {(stamp - newest) / NS:.3f} s, more than max_gap {self.settings.max_gap} s"
+                else:
+                    if self._wrap[j]:
+                        previous = group.newest_position(j)
+                        position = previous + (position - previous + math.pi) % (2.0 * math.pi) - math.pi
+                    by_group.setdefault(id(group), (group, {}))[1][j] = (position, velocity)
+                    continue
+                restarted.append(f"{self.joint_names[j]!r} ({reason})")
+                self._forget(group, [j])
+            fresh[j] = (position, velocity)
+        if restarted:
+            self._log.every("restart", logging.WARNING, f"history restarted for joint {', '.join(restarted)}")
+        for group, values in by_group.values():
+            if len(values) < len(group.joints):
+                group = self._split(group, [j for j in group.joints if j in values])
+            group.append(stamp, [values[j][0] for j in group.joints], [values[j][1] for j in group.joints])
+        if fresh:
+            group = _Group(sorted(fresh), self._origin)
+            self._groups.append(group)
+            for j in group.joints:
+                self._group_of[j] = group
+            group.append(stamp, [fresh[j][0] for j in group.joints], [fresh[j][1] for j in group.joints])
+        return bool(by_group or fresh)
+
+    def _forget(self, group: _Group, joints: list[int]) -> None:
+        group.remove(joints)
+        for j in joints:
+            self._group_of[j] = None
+        if not group.joints:
+            self._groups.remove(group)
+
+    def _split(self, group: _Group, joints: list[int]) -> _Group:
+        moved = group.split(joints)
+        self._groups.append(moved)
+        for j in joints:
+            self._group_of[j] = moved
+        return moved
 
     def _drain(self, until_ns: int | None = None) -> list[int]:
         targets = []
@@ -437,70 +525,65 @@ class StreamingEstimator:
         n = len(self.joint_names)
         state = np.full((n, 3), np.nan)
         ages = np.full(n, np.inf)
-        for members in self._same_stamp_groups():
-            self._estimate_group(target, members, state, ages)
-        ready = np.all(np.isfinite(state), axis=1)
-        state[~ready] = np.nan
-        return JointEstimate(
-            stamp_ns=target,
-            segment=self.segment,
-            positions=state[:, 0],
-            velocities=state[:, 1],
-            accelerations=state[:, 2],
-            ages=ages,
-            ready=ready,
-        )
+        for group in self._groups:
+            self._estimate_group(target, group, state, ages)
+        ready = np.isfinite(state).all(axis=1)
+        if not ready.all():
+            state[~ready] = np.nan
+        return JointEstimate(target, self.segment, state[:, 0], state[:, 1], state[:, 2], ages, ready)
 
-    def _same_stamp_groups(self) -> list[list[int]]:
-        """Joints whose histories hold exactly the same stamps (one driver's joints): fitted together."""
-        groups: dict[int, list[int]] = {}
-        for j, lineage in enumerate(self._lineage):
-            if lineage:
-                groups.setdefault(lineage, []).append(j)
-        return list(groups.values())
+    def _estimate_group(self, target: int, group: _Group, state: np.ndarray, ages: np.ndarray) -> None:
+        """Fill state (n, 3) and ages (n,) at the target for one group's joints.
 
-    def _estimate_group(self, target: int, members: list[int], state: np.ndarray, ages: np.ndarray) -> None:
-        """Fill state (n, 3) and ages (n,) at the target for joints sharing the same sample stamps."""
+        Only the samples of the fit's window are touched, however long the kept history is. Joints
+        whose window has a velocity in every sample are fitted on velocities (the acceleration is
+        their derivative); the others on positions. At a sample's own stamp the sample's position,
+        and its velocity when the message gave one, are used as they are.
+        """
         settings = self.settings
-        stamps = self._histories[members[0]].stamps
-        k = int(np.searchsorted(stamps, target, side="right")) - 1
+        members = group.joints
+        stamps = group.stamps
+        k = int(stamps.searchsorted(target, side="right")) - 1
         if k < 0:
             return
         age_ns = target - int(stamps[k])
         ages[members] = age_ns / NS
         if age_ns > self._gap_ns:
             return  # stale: not ready
-        data = np.stack([self._histories[j].data for j in members])  # (m, count, 3)
-        exact = age_ns == 0
-        if exact:  # the sample itself rather than a fit, for what the message gave
-            state[members] = data[:, k]  # supplied accelerations (finite) bypass the estimate below
         lead_ns = self._lag_ns if settings.mode == "fixed_lag" else 0
-        lo = int(np.searchsorted(stamps, target + lead_ns - round(settings.window * NS), side="left"))
-        hi = int(np.searchsorted(stamps, target + lead_ns, side="right"))
-        from_velocity = np.all(np.isfinite(data[:, lo:hi, 1]), axis=1) & (hi - lo >= 2)
-        needs = ~np.isfinite(state[members, 2])
-        if len(stamps) < 3:
-            needs &= from_velocity
-        if not np.any(needs):
-            return
-        estimated = [j for j, need in zip(members, needs, strict=True) if need]
-        by_velocity = from_velocity[needs]
-        values = np.concatenate([data[needs, :, 0], data[needs][by_velocity, :, 1]]).T  # (count, columns)
-        times = (stamps - self._origin) / NS
+        lo = int(stamps.searchsorted(target + lead_ns - self._window_ns, side="left"))
+        hi = int(stamps.searchsorted(target + lead_ns, side="right"))
+        if hi - lo < settings.order + 1:  # a sparse window: the fit widens to the nearest samples
+            lo, hi = 0, len(stamps)
+        positions, velocities = group.positions[lo:hi], group.velocities[lo:hi]
+        fitted_velocities = 0
+        if hi - lo >= 2 and group.velocities_everywhere_after(lo):
+            by_velocity = np.isfinite(velocities).all(axis=0)
+            fitted_velocities = int(by_velocity.sum())
+        if len(stamps) < 3 and not fitted_velocities:
+            return  # too few samples to differentiate positions twice
+        values = np.concatenate([positions, velocities[:, by_velocity]], axis=1) if fitted_velocities else positions
+        times = group.seconds[lo:hi]
         target_s = (target - self._origin) / NS
         if settings.method == "difference":
             fitted, d1, d2 = local_difference(times, values, target_s, lead_ns / NS)
         else:
             fitted, d1, d2 = fit_at(times, values, target_s, settings.window / 2.0, settings.order, lead_ns / NS)
-        m = len(estimated)
-        velocity_column = m + np.cumsum(by_velocity) - 1
-        for column, j in enumerate(estimated):
-            if by_velocity[column]:
-                fitted_velocity, acceleration = fitted[velocity_column[column]], d1[velocity_column[column]]
-            else:
-                fitted_velocity, acceleration = d1[column], d2[column]
-            if not exact:
-                state[j, 0] = fitted[column]
-            if not (exact and np.isfinite(state[j, 1])):  # a message velocity is kept as given
-                state[j, 1] = fitted_velocity
-            state[j, 2] = acceleration
+        m = len(members)
+        velocity, acceleration = d1[:m], d2[:m]
+        if fitted_velocities:
+            velocity, acceleration = velocity.copy(), acceleration.copy()
+            velocity[by_velocity], acceleration[by_velocity] = fitted[m:], d1[m:]
+        if age_ns == 0:  # the sample itself rather than a fit, for what the message gave
+            position = positions[k - lo]
+            given = velocities[k - lo]
+            velocity = np.where(np.isfinite(given), given, velocity)
+        else:
+            position = fitted[:m]
+        if len(stamps) >= 3:
+            state[members, 0], state[members, 1], state[members, 2] = position, velocity, acceleration
+        else:  # only the joints fitted on their velocities
+            rows = np.array(members)[by_velocity]
+            state[rows, 0] = position[by_velocity]
+            state[rows, 1] = velocity[by_velocity]
+            state[rows, 2] = acceleration[by_velocity]

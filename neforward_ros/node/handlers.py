@@ -85,7 +85,7 @@ class MessageHandlers:
     def _publish_results(self, results: list[Result], what: str) -> None:
         for result in results:
             try:
-                payloads = [(topic, cdr.encode(self._types[topic], c)) for topic, c in self.pipeline.messages(result)]
+                payloads = self.pipeline.encode(result)
             except Exception as exc:
                 self._dropped(what, exc, "cannot build its messages")
                 continue

@@ -25,8 +25,21 @@ from typing import Any
 
 import numpy as np
 
+from neforward_ros.kernel import SLICES
 from neforward_ros.node.result import Result
+from neforward_ros.node.settings import NodeSettings
+from neforward_ros.node.topics import (
+    COM_STATES,
+    LINK_STATES,
+    LINK_STATES_TYPE,
+    MARKERS,
+    accel_topic,
+    imu_topic,
+    output_list,
+    twist_topic,
+)
 from neforward_ros.stamps import time_message
+from neforward_ros.wire import cdr
 
 Message = dict[str, Any]
 
@@ -44,42 +57,47 @@ def vector3(v: np.ndarray) -> Message:
     return {"x": x, "y": y, "z": z}
 
 
-def multi_dof_blocks(
-    positions: np.ndarray,
-    orientations: np.ndarray,
-    linear_velocities: np.ndarray,
-    angular_velocities: np.ndarray,
-    linear_accelerations: np.ndarray,
-    angular_accelerations: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The numbers of a MultiDOFJointTrajectory point: transforms (..., n, 7) = translation,
-    rotation (x, y, z, w); velocities (..., n, 6) = linear, angular; accelerations likewise."""
+# Columns of the recursion's rows (kernel.SLICES) that the two MultiDOF messages take.
+_ROTATED = ("velocity", "omega", "accel", "alpha", "com_velocity", "com_accel")
+_ROTATED_COLUMNS = np.concatenate([np.arange(SLICES[name].start, SLICES[name].stop) for name in _ROTATED])
+_LINK_POSE = np.r_[SLICES["position"], SLICES["orientation"]]
+_COM_POSE = np.r_[SLICES["com_position"], SLICES["orientation"]]
+_W = SLICES["orientation"].stop - 1
+_COM_VELOCITIES = np.r_[12:15, 3:6]  # of the 18 rotated numbers: com_velocity, omega
+_COM_ACCELERATIONS = np.r_[15:18, 9:12]  # com_accel, alpha
+
+Blocks = tuple[np.ndarray, np.ndarray, np.ndarray]
+
+
+def state_blocks(result: Result) -> tuple[Blocks, Blocks]:
+    """The numbers of link_states and of com_states, in one pass over the recursion's rows: for each,
+    transforms (..., n, 7) = translation, rotation (x, y, z, w); velocities (..., n, 6) = linear,
+    angular; accelerations likewise. The six vectors of each link are rotated into root axes by one
+    matmul. Works on batched results too."""
+    table = result.table
+    shape = table.shape[:-1]
+    rotation = table[..., SLICES["rotation"]].reshape(*shape, 3, 3)
+    vectors = table[..., _ROTATED_COLUMNS].reshape(*shape, 6, 3)
+    rotated = np.matmul(vectors, np.swapaxes(rotation, -1, -2)).reshape(*shape, 18)  # rows (R v)^T
+    sign = np.copysign(1.0, table[..., _W : _W + 1])  # quaternions with w >= 0
+    link_pose, com_pose = table[..., _LINK_POSE], table[..., _COM_POSE]
+    link_pose[..., 3:] *= sign
+    com_pose[..., 3:] *= sign
     return (
-        np.concatenate([positions, orientations], axis=-1),
-        np.concatenate([linear_velocities, angular_velocities], axis=-1),
-        np.concatenate([linear_accelerations, angular_accelerations], axis=-1),
+        (link_pose, rotated[..., 0:6], rotated[..., 6:12]),
+        (com_pose, rotated[..., _COM_VELOCITIES], rotated[..., _COM_ACCELERATIONS]),
     )
 
 
-def link_states_blocks(result: Result) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`multi_dof_blocks` of link_states (works on batched results too)."""
-    root = result.in_root
-    return multi_dof_blocks(
-        root.position, result.orientation_in_root, root.velocity, root.omega, root.accel, root.alpha
-    )
+def link_states_blocks(result: Result) -> Blocks:
+    """link_states' transforms (n, 7), velocities (n, 6), accelerations (n, 6): pose of each link frame,
+    (v, omega) and (specific force, alpha) of its origin, along the root axes."""
+    return state_blocks(result)[0]
 
 
-def com_states_blocks(result: Result) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`multi_dof_blocks` of com_states (works on batched results too)."""
-    root = result.in_root
-    return multi_dof_blocks(
-        result.com_position_in_root,
-        result.orientation_in_root,
-        result.com_velocity_in_root,
-        root.omega,
-        root.com_accel,
-        root.alpha,
-    )
+def com_states_blocks(result: Result) -> Blocks:
+    """The same for each link's centre of mass (its pose has the link's rotation)."""
+    return state_blocks(result)[1]
 
 
 def _quaternion(q: np.ndarray) -> Message:
@@ -157,7 +175,7 @@ def imu(result: Result, link: int, frame_prefix: str = "") -> Message:
     zeros = [0.0] * 9
     return {
         "header": header(result.stamp_ns, frame_prefix + result.link_names[link]),
-        "orientation": _quaternion(result.orientation_in_root[link]),
+        "orientation": _quaternion(kin.orientation[link]),
         "orientation_covariance": zeros,
         "angular_velocity": vector3(kin.omega[link]),
         "angular_velocity_covariance": list(zeros),
@@ -173,7 +191,7 @@ def markers(result: Result, frame_prefix: str = "", scale: float = 0.02) -> Mess
     out = []
     frame = frame_prefix + result.root_link
     for k in range(len(result.link_names)):
-        start = result.com_position_in_root[k]
+        start = root.com_position[k]
         end = start + scale * root.com_accel[k]
         out.append(
             {
@@ -194,18 +212,67 @@ def markers(result: Result, frame_prefix: str = "", scale: float = 0.02) -> Mess
 
 def per_link_messages(
     result: Result, accel_links: Sequence[str], imu_links: Sequence[str], frame_prefix: str
-) -> list[tuple[str, dict[str, Any]]]:
+) -> list[tuple[str, Message]]:
     """(topic, contents) of the per-link outputs of one result, in :func:`output_list` order.
 
     Links the result's model does not have are left out (the pipeline logs them once).
     """
-    out: list[tuple[str, dict[str, Any]]] = []
+    out: list[tuple[str, Message]] = []
     for link in accel_links:
         if link in result.link_names:
             k = result.link_names.index(link)
-            out.append((f"~/{link}/accel", accel_stamped(result, k, frame_prefix)))
-            out.append((f"~/{link}/twist", twist_stamped(result, k, frame_prefix)))
+            out.append((accel_topic(link), accel_stamped(result, k, frame_prefix)))
+            out.append((twist_topic(link), twist_stamped(result, k, frame_prefix)))
     for link in imu_links:
         if link in result.link_names:
-            out.append((f"~/{link}/imu", imu(result, result.link_names.index(link), frame_prefix)))
+            out.append((imu_topic(link), imu(result, result.link_names.index(link), frame_prefix)))
     return out
+
+
+def all_messages(result: Result, settings: NodeSettings) -> list[tuple[str, Message]]:
+    """(topic, contents) of every output of one result, in :func:`output_list` order."""
+    prefix = settings.frame_prefix
+    out = [(LINK_STATES, link_states(result, prefix)), (COM_STATES, com_states(result, prefix))]
+    out += per_link_messages(result, settings.accel_links, settings.imu_links, prefix)
+    if settings.publish_markers:
+        out.append((MARKERS, markers(result, prefix, settings.marker_scale)))
+    return out
+
+
+class Encoder:
+    """The CDR bytes of every output of a result: what the node publishes.
+
+    link_states and com_states, published for every result, are patched into per-model templates
+    (:class:`neforward_ros.wire.cdr.MultiDofTemplate`) instead of being built as contents and
+    encoded; the per-link topics and the markers are built and encoded. Either way the bytes are
+    those of :func:`all_messages` encoded by :func:`neforward_ros.wire.cdr.encode` (tested).
+    """
+
+    def __init__(self, settings: NodeSettings) -> None:
+        self.settings = settings
+        self._types = {output.topic: output.type for output in output_list(
+            settings.accel_links, settings.imu_links, settings.publish_markers
+        )}  # fmt: skip
+        self._templates: dict[str, cdr.MultiDofTemplate] = {}
+        self._names: tuple[str, ...] = ()
+
+    def encode(self, result: Result) -> list[tuple[str, bytes]]:
+        settings = self.settings
+        if result.link_names != self._names:  # a new model: new templates
+            prefix = settings.frame_prefix
+            self._templates = {
+                LINK_STATES: cdr.MultiDofTemplate(cdr.encode(LINK_STATES_TYPE, link_states(result, prefix))),
+                COM_STATES: cdr.MultiDofTemplate(cdr.encode(LINK_STATES_TYPE, com_states(result, prefix))),
+            }
+            self._names = result.link_names
+        stamp = result.stamp_ns
+        link_blocks, com_blocks = state_blocks(result)
+        out = [
+            (LINK_STATES, self._templates[LINK_STATES].encode(stamp, *link_blocks)),
+            (COM_STATES, self._templates[COM_STATES].encode(stamp, *com_blocks)),
+        ]
+        rest = per_link_messages(result, settings.accel_links, settings.imu_links, settings.frame_prefix)
+        if settings.publish_markers:
+            rest.append((MARKERS, markers(result, settings.frame_prefix, settings.marker_scale)))
+        out += [(topic, cdr.encode(self._types[topic], contents)) for topic, contents in rest]
+        return out

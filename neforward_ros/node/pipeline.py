@@ -17,15 +17,15 @@ import numpy as np
 
 from neforward_ros.errors import ModelError
 from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator
+from neforward_ros.kernel import kernel_of
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel, load_model
 from neforward_ros.node import messages
-from neforward_ros.node.messages import per_link_messages
 from neforward_ros.node.names import is_token
 from neforward_ros.node.result import Result, make_result
 from neforward_ros.node.settings import NodeSettings
-from neforward_ros.node.topics import COM_STATES, LINK_STATES, MARKERS, ROBOT_DESCRIPTION, Output, output_list
-from neforward_ros.recursion import forward_recursion
+from neforward_ros.node.topics import ROBOT_DESCRIPTION, Output, output_list
+from neforward_ros.recursion import kinematics_table, root_state
 
 
 @dataclass(frozen=True)
@@ -56,6 +56,7 @@ class Pipeline:
         self._log = ThrottledLog(log)
         self.model: RobotModel | None = None
         self._estimator: StreamingEstimator | None = None
+        self._encoder: messages.Encoder | None = None
         for link in (*settings.accel_links, *settings.imu_links):
             if not is_token(link):
                 raise ModelError(f"link {link!r} cannot be part of a ROS 2 topic name (letters, digits, _)")
@@ -93,6 +94,7 @@ class Pipeline:
                 f"accel_links/imu_links name links that robot {model.name!r} does not have: {', '.join(missing)}; "
                 "nothing is published for them",
             )
+        kernel_of(model)  # generate the recursion now, not while the first joint states wait
         self.model = model
         self._estimator = StreamingEstimator(
             model.joint_names,
@@ -126,16 +128,13 @@ class Pipeline:
 
     def messages(self, result: Result) -> list[tuple[str, dict[str, Any]]]:
         """(topic, message contents) for every output of one result."""
-        settings = self.settings
-        prefix = settings.frame_prefix
-        out: list[tuple[str, dict[str, Any]]] = [
-            (LINK_STATES, messages.link_states(result, prefix)),
-            (COM_STATES, messages.com_states(result, prefix)),
-        ]
-        out += per_link_messages(result, settings.accel_links, settings.imu_links, prefix)
-        if settings.publish_markers:
-            out.append((MARKERS, messages.markers(result, prefix, settings.marker_scale)))
-        return out
+        return messages.all_messages(result, self.settings)
+
+    def encode(self, result: Result) -> list[tuple[str, bytes]]:
+        """(topic, CDR bytes) for every output of one result: what the runtimes publish."""
+        if self._encoder is None or self._encoder.settings is not self.settings:
+            self._encoder = messages.Encoder(self.settings)
+        return self._encoder.encode(result)
 
     # -- input ------------------------------------------------------------------------------
 
@@ -184,12 +183,6 @@ class Pipeline:
             if result is not None:
                 results.append(result)
         return results
-
-    def ages(self, now_ns: int | None = None) -> dict[str, float]:
-        """Seconds since each joint's newest sample (inf if none)."""
-        if self._estimator is None or self.model is None:
-            return {}
-        return dict(zip(self.model.joint_names, self._estimator.ages(now_ns).tolist(), strict=True))
 
     # -- computation ------------------------------------------------------------------------
 
@@ -247,7 +240,8 @@ class Pipeline:
                 "(never received, just restarted, or silent for longer than max_gap)",
             )
             return None
-        in_link = forward_recursion(
-            model, estimate.positions, estimate.velocities, estimate.accelerations, gravity=self.settings.gravity
+        # The estimator's and the supplied states are finite by construction: no input checks here.
+        table = kinematics_table(
+            model, estimate.positions, estimate.velocities, estimate.accelerations, root_state(self.settings.gravity)
         )
-        return make_result(model, estimate.stamp_ns, in_link, estimate)
+        return make_result(model, estimate.stamp_ns, table)

@@ -35,8 +35,20 @@ def output_list(accel_links: Sequence[str], imu_links: Sequence[str], publish_ma
     """The node's outputs, relative names: link_states, com_states, per-link topics, markers."""
     out = [Output(LINK_STATES, LINK_STATES_TYPE), Output(COM_STATES, LINK_STATES_TYPE)]
     for link in accel_links:
-        out += [Output(f"~/{link}/accel", ACCEL_TYPE), Output(f"~/{link}/twist", TWIST_TYPE)]
-    out += [Output(f"~/{link}/imu", IMU_TYPE) for link in imu_links]
+        out += [Output(accel_topic(link), ACCEL_TYPE), Output(twist_topic(link), TWIST_TYPE)]
+    out += [Output(imu_topic(link), IMU_TYPE) for link in imu_links]
     if publish_markers:
         out.append(Output(MARKERS, MARKERS_TYPE))
     return out
+
+
+def accel_topic(link: str) -> str:
+    return f"~/{link}/accel"
+
+
+def twist_topic(link: str) -> str:
+    return f"~/{link}/twist"
+
+
+def imu_topic(link: str) -> str:
+    return f"~/{link}/imu"

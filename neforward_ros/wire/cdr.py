@@ -20,10 +20,13 @@ from typing import Any
 import numpy as np
 
 from neforward_ros.errors import InputError
+from neforward_ros.stamps import split_stamp
 from neforward_ros.wire.rostypes import PRIMITIVES as _PRIMITIVES
 from neforward_ros.wire.rostypes import typestore
 
 HEADER = b"\x00\x01\x00\x00"  # CDR_LE encapsulation, options 0
+_STAMP = struct.Struct("<iI")
+_F8 = np.dtype("<f8")  # builtin_interfaces/Time right after the encapsulation header
 
 _ZEROS = tuple(b"\0" * n for n in range(8))
 _EMPTY: Mapping[str, Any] = {}
@@ -299,32 +302,55 @@ def _string(data: bytes, position: int) -> tuple[str, int]:
     return data[start : start + length - 1].decode(), start + length
 
 
-def patch_multi_dof(
-    template: bytes, stamps_ns: np.ndarray, transforms: np.ndarray, velocities: np.ndarray, accelerations: np.ndarray
-) -> np.ndarray:
-    """Many MultiDOFJointTrajectory messages that differ from ``template`` only in stamp and numbers.
+class MultiDofTemplate:
+    """MultiDOFJointTrajectory messages that differ from one encoded message only in the header stamp
+    and the numbers of the first point's transforms, velocities and accelerations.
 
-    ``template`` is one encoded message (one point, n transforms, velocities and accelerations);
-    the result has one row of bytes per stamp, with the header stamp and the three numeric blocks
-    replaced: (T,), (T, n, 7), (T, n, 6), (T, n, 6). Strings and counts stay the template's, so
-    every row is exactly what :func:`encode` gives for the same contents (tested).
+    Made once per model and frame (the names, frame_id and counts are the template's); each message
+    is then a copy of the template with the stamp and three blocks of numbers written in place,
+    byte for byte what :func:`encode` gives for the same contents (tested).
+
+    Args:
+        template: one encoded message (one point, n transforms, velocities and accelerations).
     """
-    layout = decode_multi_dof(template)
-    count = len(stamps_ns)
-    shapes = {"transforms": (7, layout.transforms), "velocities": (6, layout.velocities)}
-    shapes["accelerations"] = (6, layout.accelerations)
-    out = np.tile(np.frombuffer(template, dtype=np.uint8), (count, 1))
-    stamps = np.asarray(stamps_ns, dtype=np.int64)
-    sec, nanosec = np.divmod(stamps, 1_000_000_000)
-    out[:, 4:8] = sec.astype("<i4").view(np.uint8).reshape(count, 4)
-    out[:, 8:12] = nanosec.astype("<u4").view(np.uint8).reshape(count, 4)
-    for offset, (width, block), values in zip(
-        layout.offsets, shapes.values(), (transforms, velocities, accelerations), strict=True
-    ):
-        if values.shape != (count, block.shape[0], width):
-            raise InputError(
-                f"patch_multi_dof: block of shape {values.shape}, expected {(count, block.shape[0], width)}"
+
+    def __init__(self, template: bytes) -> None:
+        layout = decode_multi_dof(template)
+        self.template = bytes(template)
+        self.offsets = layout.offsets
+        self.shapes = (layout.transforms.shape, layout.velocities.shape, layout.accelerations.shape)
+
+    def encode(self, stamp_ns: int, transforms: np.ndarray, velocities: np.ndarray, accelerations: np.ndarray) -> bytes:
+        """One message: stamp (ns) and blocks (n, 7), (n, 6), (n, 6)."""
+        buffer = bytearray(self.template)
+        _STAMP.pack_into(buffer, 4, *split_stamp(stamp_ns))
+        for offset, shape, values in zip(
+            self.offsets, self.shapes, (transforms, velocities, accelerations), strict=True
+        ):
+            if values.shape != shape or values.dtype != _F8:
+                raise InputError(f"MultiDOFJointTrajectory block {values.shape} {values.dtype}, expected {shape} <f8")
+            buffer[offset : offset + 8 * values.size] = values.tobytes()  # C order, whatever the strides
+        return bytes(buffer)
+
+    def encode_many(
+        self, stamps_ns: np.ndarray, transforms: np.ndarray, velocities: np.ndarray, accelerations: np.ndarray
+    ) -> np.ndarray:
+        """Many messages at once: one row of bytes per stamp, (T,), (T, n, 7), (T, n, 6), (T, n, 6)."""
+        count = len(stamps_ns)
+        out = np.tile(np.frombuffer(self.template, dtype=np.uint8), (count, 1))
+        stamps = np.asarray(stamps_ns, dtype=np.int64)
+        sec, nanosec = np.divmod(stamps, 1_000_000_000)
+        if count and (sec.min() < -(2**31) or sec.max() >= 2**31):
+            raise InputError("a stamp is outside the range of builtin_interfaces/Time (int32 seconds)")
+        out[:, 4:8] = sec.astype("<i4").view(np.uint8).reshape(count, 4)
+        out[:, 8:12] = nanosec.astype("<u4").view(np.uint8).reshape(count, 4)
+        for offset, shape, values in zip(
+            self.offsets, self.shapes, (transforms, velocities, accelerations), strict=True
+        ):
+            if values.shape != (count, *shape):
+                raise InputError(f"MultiDOFJointTrajectory blocks of shape {values.shape}, expected {(count, *shape)}")
+            size = 8 * shape[0] * shape[1]
+            out[:, offset : offset + size] = (
+                np.ascontiguousarray(values, dtype="<f8").view(np.uint8).reshape(count, size)
             )
-        size = 8 * block.size
-        out[:, offset : offset + size] = np.ascontiguousarray(values, dtype="<f8").view(np.uint8).reshape(count, size)
-    return out
+        return out
