@@ -23,6 +23,7 @@ from types import MappingProxyType
 
 import numpy as np
 
+from neforward_ros import disk_cache
 from neforward_ros.errors import ModelError
 
 Vec3 = tuple[float, float, float]
@@ -145,8 +146,15 @@ def load_model(source: str | os.PathLike[str], *, root_link: str | None = None) 
             ``root_link`` is not a link of the URDF.
     """
     xml_bytes = _read_source(source)
-    robot = _parse_urdf(xml_bytes)
-    return _build_model(robot, root_link)
+    stored = disk_cache.load("models", xml_bytes, root_link or "")
+    if stored is not None:
+        try:
+            return _from_contents(stored)
+        except (KeyError, TypeError, ValueError):
+            pass  # an unreadable file: parse, and write it anew
+    model = _build_model(_parse_urdf(xml_bytes), root_link)
+    disk_cache.store("models", xml_bytes, root_link or "", value=_contents(model))
+    return model
 
 
 def require_urdf_parser() -> None:
@@ -386,3 +394,41 @@ def _vec3(values: np.ndarray) -> Vec3:
 
 def _mat3(matrix: np.ndarray) -> Mat3:
     return tuple(float(v) for v in np.asarray(matrix).reshape(9))  # type: ignore[return-value]
+
+
+def _contents(model: RobotModel) -> dict:
+    """The model as JSON-able contents (floats round-trip exactly through JSON)."""
+    return {
+        "name": model.name,
+        "link_names": list(model.link_names),
+        "joint_names": list(model.joint_names),
+        "com_in_link": [list(c) for c in model.com_in_link],
+        "parent_joints": [
+            None if j is None else {**{f: getattr(j, f) for f in ParentJoint.__slots__}, "kind": j.kind.value}
+            for j in model.parent_joints
+        ],
+    }
+
+
+def _from_contents(contents: dict) -> RobotModel:
+    def joint(entry: dict | None) -> ParentJoint | None:
+        if entry is None:
+            return None
+        fields = {f: entry[f] for f in ParentJoint.__slots__}
+        for name, value in fields.items():
+            if isinstance(value, list):
+                fields[name] = tuple(value)
+        fields["kind"] = JointKind(entry["kind"])
+        return ParentJoint(**fields)
+
+    link_names = tuple(contents["link_names"])
+    joint_names = tuple(contents["joint_names"])
+    return RobotModel(
+        name=contents["name"],
+        link_names=link_names,
+        joint_names=joint_names,
+        parent_joints=tuple(joint(entry) for entry in contents["parent_joints"]),
+        com_in_link=tuple(tuple(c) for c in contents["com_in_link"]),
+        link_index=MappingProxyType({name: i for i, name in enumerate(link_names)}),
+        joint_index=MappingProxyType({name: i for i, name in enumerate(joint_names)}),
+    )

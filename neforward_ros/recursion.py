@@ -88,7 +88,7 @@ class LinkKinematics:
         fields = {name: table[..., part] for name, part in SLICES.items()}
         fields["rotation"] = fields["rotation"].reshape((*table.shape[:-1], 3, 3))
         orientation = fields["orientation"]
-        fields["orientation"] = np.where(orientation[..., 3:] < 0.0, -orientation, orientation)
+        fields["orientation"] = orientation * np.copysign(1.0, orientation[..., 3:])  # w >= 0
         return cls(link_names=link_names, **fields)
 
     def in_root(self) -> LinkKinematics:
@@ -165,18 +165,18 @@ def kinematics_table(
         buffer = bytearray(packer.size)
         packer.pack_into(buffer, 0, *values)
         return np.frombuffer(buffer, dtype=float).reshape(n_links, ROW)
+    # Batches are computed field by field: each of the kernel's values is one contiguous row of T
+    # numbers, and the (T, n_links, ROW) table is a transposed view of those rows (no copy).
     count = q.shape[0]
-    table = np.empty((count, n_links, ROW))
+    rows = np.empty((n_links * ROW, count))
     columns = [np.ascontiguousarray(x.T) for x in (q, qd, qdd)]
     for start in range(0, count, _CHUNK):
         part = slice(start, min(count, start + _CHUNK))
         chunk_root = [r[part] if isinstance(r, np.ndarray) else r for r in root]
         values = kernel(*(c[:, part] for c in columns), chunk_root, np.sin, np.cos)
-        block = np.empty((n_links * ROW, part.stop - part.start))
         for row, value in enumerate(values):
-            block[row] = value
-        table[part] = block.T.reshape(-1, n_links, ROW)
-    return table
+            rows[row, part] = value
+    return rows.reshape(n_links, ROW, count).transpose(2, 0, 1)
 
 
 @functools.lru_cache(maxsize=16)

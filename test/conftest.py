@@ -85,6 +85,15 @@ def assert_close(actual: np.ndarray, expected: np.ndarray, rel: float, what: str
     assert error <= rel * scale, f"{what}: max error {error:.3e} exceeds {rel:.1e} x scale {scale:.3e}"
 
 
+@pytest.fixture(autouse=True, scope="session")
+def disk_cache_of_this_session(tmp_path_factory):
+    """Parsed models are cached on disk (neforward_ros.disk_cache): the suite keeps its own, in a
+    temporary folder, for itself and every process it starts."""
+    import os
+
+    os.environ["NEFORWARD_CACHE"] = str(tmp_path_factory.mktemp("disk_cache"))
+
+
 @pytest.fixture(params=sorted(TEST_ROBOTS))
 def robot_path(request) -> Path:
     return TEST_ROBOTS[request.param]

@@ -11,9 +11,7 @@ import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
 import numpy as np
-import pytest
-
-pin = pytest.importorskip("pinocchio", reason="Pinocchio (PyPI 'pin') is the test oracle; install the test extras")
+import pinocchio as pin  # test modules that use this one are skipped without it (conftest.REQUIREMENTS)
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
@@ -49,10 +47,9 @@ class PinocchioOracle:
             layout.append((joint.idx_q, joint.nq, joint.idx_v))
         return layout
 
-    def kinematics(self, joint_names, link_names, q, qd, qdd) -> dict[str, np.ndarray]:
-        """Per link, in the link frame (LOCAL): omega, alpha, velocity, accel and com_accel (specific
-        forces), com_velocity; in the root frame: position, rotation (link -> root), com_position."""
-        model, data = self.model, self.data
+    def pin_vectors(self, joint_names, q, qd, qdd) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Pinocchio's configuration, velocity and acceleration vectors for our joint columns."""
+        model = self.model
         qp, vp, ap = np.zeros(model.nq), np.zeros(model.nv), np.zeros(model.nv)
         for k, (iq, nq, iv) in enumerate(self.joint_layout(joint_names)):
             if nq == 2:  # continuous joint: Pinocchio stores (cos q, sin q)
@@ -60,35 +57,55 @@ class PinocchioOracle:
             else:
                 qp[iq] = q[k]
             vp[iv], ap[iv] = qd[k], qdd[k]
+        return qp, vp, ap
+
+    def fill(self, link_names, qp, vp, ap) -> dict[str, np.ndarray]:
+        """Per link, as an efficient Pinocchio user would collect them: LOCAL omega, alpha, velocity,
+        accel and com_accel (specific forces, gravity added in one vectorised step); position and
+        rotation in the root frame. What bench_recursion.py times against forward_recursion."""
+        model, data, local = self.model, self.data, pin.ReferenceFrame.LOCAL
+        velocities, accels, com_accels, placements = [], [], [], []
         pin.forwardKinematics(model, data, qp, vp, ap)
         pin.updateFramePlacements(model, data)
-        local = pin.ReferenceFrame.LOCAL
-        keys = (
-            "omega",
-            "alpha",
-            "velocity",
-            "accel",
-            "com_accel",
-            "position",
-            "rotation",
-            "com_position",
-            "com_velocity",
-        )
-        out = {key: [] for key in keys}
         for link in link_names:
             body, com = self.link_frames[link]
-            rotation = data.oMf[body].rotation
-            minus_g_in_link = rotation.T @ -GRAVITY
-            velocity = pin.getFrameVelocity(model, data, body, local)
-            accel = pin.getFrameClassicalAcceleration(model, data, body, local)
-            com_accel = pin.getFrameClassicalAcceleration(model, data, com, local)
-            out["omega"].append(velocity.angular.copy())
-            out["velocity"].append(velocity.linear.copy())
-            out["alpha"].append(accel.angular.copy())
-            out["accel"].append(accel.linear + minus_g_in_link)
-            out["com_accel"].append(com_accel.linear + minus_g_in_link)
-            out["position"].append(data.oMf[body].translation.copy())
-            out["rotation"].append(rotation.copy())
-            out["com_position"].append(data.oMf[com].translation.copy())
-            out["com_velocity"].append(pin.getFrameVelocity(model, data, com, local).linear.copy())
-        return {key: np.array(values) for key, values in out.items()}
+            velocities.append(pin.getFrameVelocity(model, data, body, local).np)
+            accels.append(pin.getFrameClassicalAcceleration(model, data, body, local).np)
+            com_accels.append(pin.getFrameClassicalAcceleration(model, data, com, local).np)
+            placements.append(data.oMf[body].homogeneous)
+        velocity, accel, com_accel = np.array(velocities), np.array(accels), np.array(com_accels)
+        pose = np.array(placements)
+        rotation = pose[:, :3, :3]
+        minus_g_in_link = -GRAVITY @ rotation  # row k: R_k^T (-g)
+        return {
+            "omega": velocity[:, 3:],
+            "alpha": accel[:, 3:],
+            "velocity": velocity[:, :3],
+            "accel": accel[:, :3] + minus_g_in_link,
+            "com_accel": com_accel[:, :3] + minus_g_in_link,
+            "position": pose[:, :3, 3],
+            "rotation": rotation,
+        }
+
+    def calls_only(self, link_names, qp, vp, ap) -> None:
+        """The same Pinocchio calls with nothing collected: a floor, not the same outputs."""
+        model, data, local = self.model, self.data, pin.ReferenceFrame.LOCAL
+        pin.forwardKinematics(model, data, qp, vp, ap)
+        pin.updateFramePlacements(model, data)
+        for link in link_names:
+            body, com = self.link_frames[link]
+            pin.getFrameVelocity(model, data, body, local)
+            pin.getFrameClassicalAcceleration(model, data, body, local)
+            pin.getFrameClassicalAcceleration(model, data, com, local)
+
+    def kinematics(self, joint_names, link_names, q, qd, qdd) -> dict[str, np.ndarray]:
+        """Per link, in the link frame (LOCAL): omega, alpha, velocity, accel and com_accel (specific
+        forces), com_velocity; in the root frame: position, rotation (link -> root), com_position."""
+        model, data = self.model, self.data
+        out = self.fill(link_names, *self.pin_vectors(joint_names, q, qd, qdd))
+        local = pin.ReferenceFrame.LOCAL
+        out["com_position"] = np.array([data.oMf[self.link_frames[link][1]].translation for link in link_names])
+        out["com_velocity"] = np.array(
+            [pin.getFrameVelocity(model, data, self.link_frames[link][1], local).linear for link in link_names]
+        )
+        return out

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -117,10 +118,82 @@ def test_multi_dof_decoder_reads_what_rosbags_reads(contents) -> None:
 @given(contents=SAMPLES["sensor_msgs/msg/JointState"])
 def test_joint_state_decoder_reads_what_rosbags_reads(contents) -> None:
     encoded = cdr.encode("sensor_msgs/msg/JointState", contents)
-    stamp, names, positions, velocities = cdr.decode_joint_state(encoded)
+    stamp, names, positions, velocities, efforts = cdr.decode_joint_state(encoded)
     expected = rostypes.deserialize("sensor_msgs/msg/JointState", encoded)
     assert stamp == expected["header"]["stamp"]["sec"] * 10**9 + expected["header"]["stamp"]["nanosec"]
     assert list(names) == expected["name"]
     assert positions.tolist() == expected["position"] and velocities.tolist() == expected["velocity"]
+    assert efforts.tolist() == expected["effort"]
     with pytest.raises(InputError):
         cdr.decode_joint_state(encoded[: len(encoded) // 2] if len(encoded) > 40 else b"\x01\x00")
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    names=st.lists(st.sampled_from(["a", "b", "elbow", "j_4"]), min_size=1, max_size=4, unique=True),
+    others=st.lists(st.sampled_from(["a", "b", "elbow", "j_4"]), min_size=0, max_size=3, unique=True),
+    plan=st.lists(st.tuples(st.booleans(), st.integers(0, 2), st.booleans()), min_size=1, max_size=30),
+    frame=st.sampled_from(["", "base", "a_longer_frame"]),
+)
+def test_bulk_joint_state_decoding_reads_what_rosbags_reads(names, others, plan, frame) -> None:
+    """Messages of one layout and of others, interleaved, some malformed (names and positions of
+    different lengths), some with velocities or efforts: grouped by names, each message's numbers."""
+    rng = np.random.default_rng(len(plan))
+    encoded = []
+    for k, (second, extra, malformed) in enumerate(plan):
+        chosen = others if second and others else names
+        n = len(chosen)
+        contents = {
+            "header": {"stamp": {"sec": 1_700_000_000 + k, "nanosec": 1000 * k}, "frame_id": frame},
+            "name": chosen,
+            "position": rng.uniform(-1, 1, n + (1 if malformed else 0)).tolist(),
+            "velocity": rng.uniform(-1, 1, n).tolist() if extra >= 1 else [],
+            "effort": rng.uniform(-1, 1, n).tolist() if extra >= 2 else [],
+        }
+        encoded.append(cdr.encode("sensor_msgs/msg/JointState", contents))
+    batch = cdr.decode_joint_states(encoded)
+    seen = set(batch.malformed)
+    for message_names, (indices, positions, velocities, efforts) in batch.groups.items():
+        for row, index in enumerate(indices.tolist()):
+            expected = rostypes.deserialize("sensor_msgs/msg/JointState", encoded[index])
+            assert tuple(expected["name"]) == message_names and index not in seen
+            seen.add(index)
+            assert positions[row].tolist() == expected["position"]
+            for got, field in ((velocities, "velocity"), (efforts, "effort")):
+                assert got[row].tolist() == expected[field] if expected[field] else np.all(np.isnan(got[row]))
+    for index, data in enumerate(encoded):
+        expected = rostypes.deserialize("sensor_msgs/msg/JointState", data)
+        assert (
+            batch.stamps[index] == expected["header"]["stamp"]["sec"] * 10**9 + expected["header"]["stamp"]["nanosec"]
+        )
+        assert (index in batch.malformed) == (len(expected["name"]) != len(expected["position"]))
+    assert seen == set(range(len(encoded)))
+
+
+def test_type_facts_kept_on_disk_read_back_and_spare_the_type_store(tmp_path) -> None:
+    """The facts of a type come from rosbags' type store once, then from the disk cache: equal, and a
+    new process encoding messages of types seen before does not build the type store at all."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, json; from neforward_ros.wire import cdr, rostypes; "
+        "cdr.encode('trajectory_msgs/msg/MultiDOFJointTrajectory', {}); "
+        "cdr.encode('sensor_msgs/msg/Imu', {}); "
+        "print(json.dumps([rostypes.facts('sensor_msgs/msg/Imu'), "
+        "'rosbags.typesys.stores.ros2_jazzy' in sys.modules]))"
+    )
+    environment = {**os.environ, "NEFORWARD_CACHE": str(tmp_path)}
+    runs = [
+        subprocess.run([sys.executable, "-c", code], env=environment, capture_output=True, text=True, timeout=60)
+        for _ in range(2)
+    ]
+    import json
+
+    (first, built_first), (second, built_second) = (json.loads(run.stdout) for run in runs)
+    assert (built_first, built_second) == (True, False)
+    assert first == second
+    store = rostypes.typestore()
+    assert second["rihs01"] == store.hash_rihs01("sensor_msgs/msg/Imu")
+    assert second["msgdef"] == store.generate_msgdef("sensor_msgs/msg/Imu", ros_version=2)[0]

@@ -204,3 +204,43 @@ def test_continuous_columns_mark_the_wrapping_joints() -> None:
     )
     model = load_model(xml)
     assert model.joint_names == ("r", "w") and model.continuous_columns == (False, True)
+
+
+def test_models_read_back_from_the_cache_equal_the_parsed_ones(tmp_path, monkeypatch) -> None:
+    monkeypatch.setenv("NEFORWARD_CACHE", str(tmp_path))
+    import json
+
+    parsed = {}
+    for name, path in TEST_ROBOTS.items():
+        parsed[name] = load_model(path)
+        assert load_model(path) == parsed[name]  # from the file now
+    assert len(list(tmp_path.glob("models/*.json"))) == len(TEST_ROBOTS)
+    for path in tmp_path.glob("models/*.json"):  # corrupt them all: parsed again, and rewritten
+        path.write_text("{not json")
+    assert load_model(TEST_ROBOTS["panda"]) == parsed["panda"]
+    assert sum(1 for path in tmp_path.glob("models/*.json") if path.read_text().startswith('{"')) == 1
+    json.loads(next(p for p in tmp_path.glob("models/*.json") if p.read_text().startswith('{"')).read_text())
+    sub = load_model(TEST_ROBOTS["panda"], root_link="panda_link4")  # another root: another entry
+    assert sub.root_link == "panda_link4" and load_model(TEST_ROBOTS["panda"], root_link="panda_link4") == sub
+
+
+def test_a_cached_model_needs_no_urdf_parser(tmp_path) -> None:
+    """The point of the cache: yourdfpy (and trimesh) are not imported for a URDF seen before."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; from neforward_ros import load_model; "
+        f"load_model({str(TEST_ROBOTS['panda'])!r}); print('yourdfpy' in sys.modules)"
+    )
+    environment = {**os.environ, "NEFORWARD_CACHE": str(tmp_path)}
+    runs = [
+        subprocess.run([sys.executable, "-c", code], env=environment, capture_output=True, text=True, timeout=60)
+        for _ in range(2)
+    ]
+    assert [run.stdout.strip() for run in runs] == ["True", "False"], [run.stderr for run in runs]
+    off = subprocess.run(
+        [sys.executable, "-c", code], env={**environment, "NEFORWARD_CACHE": "off"}, capture_output=True, text=True
+    )
+    assert off.stdout.strip() == "True"

@@ -144,20 +144,6 @@ def test_finite_differences_of_poses_reproduce_rates(robot_path) -> None:
     assert_close(at_centre.com_accel, d2(com_position, centre) - gravity, 1e-5, "com_accel")
 
 
-def test_batched_equals_per_sample(robot_path) -> None:
-    model = load_model(robot_path)
-    n = len(model.joint_names)
-    q, qd, qdd = smooth_trajectory(n, np.linspace(0.0, 3.0, 25))
-    batch = forward_recursion(model, q, qd, qdd)
-    assert batch.accel.shape == (25, len(model.link_names), 3)
-    assert batch.rotation.shape == (25, len(model.link_names), 3, 3)
-    for t in range(len(q)):
-        single = forward_recursion(model, q[t], qd[t], qdd[t])
-        for field in ("omega", "alpha", "velocity", "accel", "com_accel", "position", "rotation"):
-            # numpy's vectorised sin/cos and math's differ in the last bit: a bound relative to the scale
-            assert_close(getattr(batch, field)[t], getattr(single, field), 1e-13, field)
-
-
 def test_batch_of_one_and_of_none() -> None:
     model = load_model(TEST_ROBOTS["tree"])
     n = len(model.joint_names)

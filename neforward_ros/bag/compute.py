@@ -1,10 +1,10 @@
-"""From a recording's joint samples to the node's results: segments, whole-recording estimates,
-and one batched recursion."""
+"""From a recording's joint samples to the node's results: segments, whole-recording estimates, and
+the batched recursion, a chunk of samples at a time (memory stays bounded for long recordings)."""
 
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,17 +13,44 @@ from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.read import Recording
 from neforward_ros.bag.report import Segment
 from neforward_ros.estimation.batch import estimate_at
+from neforward_ros.model import RobotModel
 from neforward_ros.node.result import Result, make_result
 from neforward_ros.recursion import kinematics_table, root_state
 from neforward_ros.stamps import NS
 
+CHUNK = 8192
+"""Samples per batched recursion: bounds the memory of every later stage at a few MB per link."""
+
 
 @dataclass
-class Batch:
-    """All outputs of the recording, concatenated over segments."""
+class States:
+    """The estimated joint states of every output sample, concatenated over segments.
 
-    result: Result
+    Attributes:
+        stamps: (T,) the samples' stamps, integer ns; log_times: (T,) their recording times.
+        q, qd, qdd: (T, n) in the model's joint order.
+    """
+
+    stamps: np.ndarray
     log_times: np.ndarray
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.stamps)
+
+
+def results(
+    model: RobotModel, states: States, gravity: tuple[float, float, float], chunk: int | None = None
+) -> Iterator[tuple[Result, np.ndarray]]:
+    """(result, recording times) of consecutive chunks of the samples, each from one batched recursion."""
+    root = root_state(gravity)
+    chunk = CHUNK if chunk is None else chunk
+    for start in range(0, len(states), chunk):
+        part = slice(start, start + chunk)
+        table = kinematics_table(model, states.q[part], states.qd[part], states.qdd[part], root)
+        yield make_result(model, states.stamps[part], table), states.log_times[part]
 
 
 def _segments(recording: Recording) -> list[tuple[int, int]]:
@@ -38,7 +65,8 @@ def _segments(recording: Recording) -> list[tuple[int, int]]:
     return [(a, b) for a, b in itertools.pairwise(edges) if b > a]
 
 
-def compute(recording: Recording, options: BagOptions, progress: Callable[[str, float], None]) -> Batch:
+def estimate_states(recording: Recording, options: BagOptions, progress: Callable[[str, float], None]) -> States:
+    """Each segment's joint states at every message stamp, from the whole-recording estimator."""
     model = recording.model
     wrap = model.continuous_columns
     pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
@@ -95,9 +123,7 @@ def compute(recording: Recording, options: BagOptions, progress: Callable[[str, 
         stamps = np.zeros(0, dtype=np.int64)
         zeros = np.zeros((0, len(model.joint_names)))
         pieces = [(stamps, stamps, zeros, zeros, zeros)]
-    stamps, log_times, q, qd, qdd = (np.concatenate(parts) for parts in zip(*pieces, strict=True))
-    result = make_result(model, stamps, kinematics_table(model, q, qd, qdd, root_state(options.gravity)))
-    return Batch(result, log_times)
+    return States(*(np.concatenate(parts) for parts in zip(*pieces, strict=True)))
 
 
 def _gap_to_samples(t: np.ndarray, targets: np.ndarray) -> np.ndarray:

@@ -18,41 +18,72 @@ CSV_FIELDS = (
 )
 
 
-def write_csv(path: Path, result: Result, model: RobotModel) -> None:
-    """One row per sample: stamp, then per link omega, alpha, accel and com_accel (x, y, z).
+class CsvWriter:
+    """One row per sample, written a chunk of results at a time: stamp, then per link omega, alpha,
+    accel and com_accel (x, y, z).
 
     The header names each column's link, quantity, frame, component and unit, e.g.
     ``panda_hand.accel_in_root.z[m/s^2]``: vectors along the root frame's axes. accel and com_accel
-    are specific forces (a - g), as in the node's messages.
+    are specific forces (a - g), as in the node's messages. ``t[s]`` counts from the first sample.
     """
-    root = result.in_root
-    stamps = np.asarray(result.stamp_ns, dtype=np.int64)
-    names = ["stamp_ns", "t[s]"]
-    blocks = []
-    for link_index, link in enumerate(model.link_names):
-        for quantity, unit, frame in CSV_FIELDS:
-            names += [f"{link}.{quantity}_in_{frame}.{axis}[{unit}]" for axis in "xyz"]
-            blocks.append(getattr(root, quantity)[:, link_index, :])
-    values = np.concatenate([((stamps - stamps[0]) / NS)[:, None], *blocks], axis=1)
-    with path.open("w") as stream:
-        stream.write(",".join(names) + "\n")
+
+    def __init__(self, path: Path, model: RobotModel) -> None:
+        self.model = model
+        self.stream = path.open("w")
+        self.origin: int | None = None
+        names = ["stamp_ns", "t[s]"]
+        for link in model.link_names:
+            for quantity, unit, frame in CSV_FIELDS:
+                names += [f"{link}.{quantity}_in_{frame}.{axis}[{unit}]" for axis in "xyz"]
+        self.stream.write(",".join(names) + "\n")
+
+    def write(self, result: Result) -> None:
+        root = result.in_root
+        stamps = np.asarray(result.stamp_ns, dtype=np.int64)
+        if self.origin is None:
+            self.origin = int(stamps[0])
+        blocks = [
+            getattr(root, quantity)[:, link_index, :]
+            for link_index in range(len(self.model.link_names))
+            for quantity, _, _ in CSV_FIELDS
+        ]
+        values = np.concatenate([((stamps - self.origin) / NS)[:, None], *blocks], axis=1)
         text = np.char.mod("%.9g", values)
-        for stamp, row in zip(stamps.tolist(), text.tolist(), strict=True):
-            stream.write(f"{stamp}," + ",".join(row) + "\n")
+        self.stream.writelines(
+            f"{stamp}," + ",".join(row) + "\n" for stamp, row in zip(stamps.tolist(), text.tolist(), strict=True)
+        )
+
+    def close(self) -> None:
+        self.stream.close()
 
 
-def write_plot(path: Path, result: Result, model: RobotModel, gravity: tuple[float, float, float]) -> None:
+class PlotSeries:
+    """What the plot shows, gathered chunk by chunk: every link's |a| (kinematic: gravity removed)
+    and |alpha| at every sample."""
+
+    def __init__(self, gravity: tuple[float, float, float]) -> None:
+        self.gravity = np.asarray(gravity, dtype=float)
+        self.stamps: list[np.ndarray] = []
+        self.accel: list[np.ndarray] = []
+        self.alpha: list[np.ndarray] = []
+
+    def add(self, result: Result) -> None:
+        root = result.in_root
+        self.stamps.append(np.asarray(result.stamp_ns, dtype=np.int64))
+        self.accel.append(np.linalg.norm(root.accel + self.gravity, axis=-1))
+        self.alpha.append(np.linalg.norm(root.alpha, axis=-1))
+
+
+def write_plot(path: Path, series: PlotSeries, model: RobotModel) -> None:
     """PNG: every link's |a| (kinematic, gravity removed) and |alpha| over time, peaks marked and labelled."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    root = result.in_root
-    stamps = np.asarray(result.stamp_ns, dtype=np.int64)
+    stamps = np.concatenate(series.stamps)
     t = (stamps - stamps[0]) / NS
-    accel = np.linalg.norm(root.accel + np.asarray(gravity), axis=-1)
-    alpha = np.linalg.norm(root.alpha, axis=-1)
+    accel, alpha = np.concatenate(series.accel), np.concatenate(series.alpha)
     figure, axes = plt.subplots(2, 1, figsize=(13, 8), sharex=True)
     for axis, values, label in ((axes[0], accel, "|a| [m/s^2]"), (axes[1], alpha, "|alpha| [rad/s^2]")):
         axis.set_prop_cycle(color=plt.cm.tab20.colors)  # tens of links: more colours than the default 10

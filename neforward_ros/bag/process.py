@@ -2,16 +2,18 @@
 
 from __future__ import annotations
 
+import os
+import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
 
-from neforward_ros.bag.compute import compute
-from neforward_ros.bag.export import write_csv, write_plot
+from neforward_ros.bag.compute import estimate_states, results
+from neforward_ros.bag.export import CsvWriter, PlotSeries, write_plot
 from neforward_ros.bag.options import BagOptions, check_options
 from neforward_ros.bag.read import read
 from neforward_ros.bag.report import BagReport, Progress
-from neforward_ros.bag.write import atomic, write_bag
+from neforward_ros.bag.write import RecordingWriter
 from neforward_ros.errors import InputError
 
 
@@ -52,15 +54,50 @@ def process_bag(
     for link in (*options.accel_links, *options.imu_links):
         if link not in model.link_index:
             raise InputError(f"link {link!r} is not in robot {model.name!r}")
-    batch = compute(recording, options, progress)
+    states = estimate_states(recording, options, progress)
     report = recording.report
-    report.samples_out = len(batch.log_times)
+    report.samples_out = len(states)
     if report.samples_out == 0:
         raise InputError("no output: no stretch of the recording has enough samples of every joint")
-    report.topics = write_bag(output, batch, options, progress)
-    if csv_path is not None:
-        atomic(Path(csv_path), lambda path: write_csv(path, batch.result, model))
-    if plot_path is not None:
-        atomic(Path(plot_path), lambda path: write_plot(path, batch.result, model, options.gravity))
+    # Every output is written under a temporary name and all are moved into place together at the
+    # end: an error or an interrupt leaves none of them, and nothing half-written.
+    partials: list[Path] = []
+    recording_writer = RecordingWriter(output, options, model)
+    try:
+        csv = None
+        if csv_path is not None:
+            partials.append(_partial(Path(csv_path)))
+            csv = CsvWriter(partials[-1], model)
+        series = PlotSeries(options.gravity) if plot_path is not None else None
+        written = 0
+        for result, log_times in results(model, states, options.gravity):
+            recording_writer.write(result, log_times)
+            if csv is not None:
+                csv.write(result)
+            if series is not None:
+                series.add(result)
+            written += len(log_times)
+            progress("writing", written / len(states))
+        if csv is not None:
+            csv.close()
+        if series is not None and plot_path is not None:
+            partials.append(_partial(Path(plot_path)))
+            write_plot(partials[-1], series, model)
+        written_recording = recording_writer.finish()
+        finals = [Path(p) for p in (csv_path, plot_path) if p is not None]
+        for partial, final in zip(partials, finals, strict=True):
+            partial.rename(final)
+        written_recording.rename(output)
+    except BaseException:
+        recording_writer.discard()
+        for partial in partials:
+            partial.unlink(missing_ok=True)
+        raise
+    shutil.rmtree(recording_writer.staging, ignore_errors=True)
+    report.topics = recording_writer.topics
     report.seconds = time.monotonic() - started
     return report
+
+
+def _partial(path: Path) -> Path:
+    return path.with_name(f".{path.name}.partial-{os.getpid()}{path.suffix}")

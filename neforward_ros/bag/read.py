@@ -15,7 +15,6 @@ from neforward_ros.errors import InputError, ModelError
 from neforward_ros.model import RobotModel, load_model
 from neforward_ros.node import topics
 from neforward_ros.wire import cdr
-from neforward_ros.wire.rostypes import typestore
 
 
 @dataclass
@@ -43,26 +42,15 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
         connections = [c for c in reader.connections if c.topic == topic]
         total = max(sum(c.msgcount for c in connections), 1)
         report = BagReport(joint_states_topic=topic, messages=0)
-        stamps, log_times = [], []
-        names_ids: list[int] = []  # per message: which names tuple
-        positions_list: list[np.ndarray] = []
-        velocities_list: list[np.ndarray] = []
-        name_tuples: dict[tuple[str, ...], int] = {}
+        raws: list[bytes] = []
+        log_times: list[int] = []
         try:
             for index, (_, log_time, raw) in enumerate(reader.messages(connections=connections)):
-                stamp, names, positions, velocities = cdr.decode_joint_state(raw)
-                if len(positions) != len(names):
-                    continue  # a malformed message, as the node would drop it
-                if stamp == 0:
-                    stamp = log_time
-                    report.zero_stamps += 1
-                names_ids.append(name_tuples.setdefault(names, len(name_tuples)))
-                positions_list.append(positions)
-                velocities_list.append(velocities)
-                stamps.append(stamp)
+                raws.append(raw)
                 log_times.append(log_time)
                 if index % 2048 == 0:
                     progress("reading", index / total)
+            decoded = cdr.decode_joint_states(raws)
         except InputError as exc:
             raise InputError(f"{source}: corrupt joint state message: {exc}") from exc
         except Exception as exc:  # truncated or corrupt storage
@@ -70,42 +58,40 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
         progress("reading", 1.0)
     finally:
         reader.close()
+    # Malformed messages (names and positions of different lengths) are dropped, as the node drops them.
+    keep = np.ones(len(raws), dtype=bool)
+    keep[decoded.malformed] = False
+    stamps, times = decoded.stamps[keep], np.asarray(log_times, dtype=np.int64)[keep]
+    renumber = np.cumsum(keep) - 1
+    zero = stamps == 0
+    report.zero_stamps = int(np.count_nonzero(zero))
+    stamps[zero] = times[zero]  # no stamp: the recording time, as the node uses the receive time
     report.messages = len(stamps)
-    columns, unknown = _columns(model, name_tuples, np.asarray(names_ids), positions_list, velocities_list)
+    columns, unknown = _columns(model, decoded, renumber)
     report.ignored_names = sorted(unknown)
     missing = [model.joint_names[j] for j in range(len(model.joint_names)) if j not in columns]
     if missing:
         raise InputError(f"joints of robot {model.name!r} missing from {topic}: {', '.join(missing)}")
-    return Recording(model, report, np.asarray(stamps, dtype=np.int64), np.asarray(log_times, dtype=np.int64), columns)
+    return Recording(model, report, stamps, times, columns)
 
 
 def _columns(
-    model: RobotModel,
-    name_tuples: dict[tuple[str, ...], int],
-    names_ids: np.ndarray,
-    positions: list[np.ndarray],
-    velocities: list[np.ndarray],
+    model: RobotModel, decoded: cdr.JointStateBatch, renumber: np.ndarray
 ) -> tuple[dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]], set[str]]:
     """Per model joint: (message indices, positions, velocities or NaN), from messages grouped by names."""
     known = model.joint_index
     ignored = set(model.mimic_joint_names)
     parts: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
     unknown: set[str] = set()
-    for names, group in name_tuples.items():
-        rows = np.nonzero(names_ids == group)[0]
-        block = np.stack([positions[i] for i in rows])
-        width = len(names)
-        speeds = np.full((len(rows), width), np.nan)
-        with_velocity = [k for k, i in enumerate(rows) if len(velocities[i]) == width]
-        if with_velocity:
-            speeds[with_velocity] = np.stack([velocities[rows[k]] for k in with_velocity])
+    for names, (indices, positions, velocities, _) in decoded.groups.items():
+        rows = renumber[indices]
         for k, name in enumerate(names):
             j = known.get(name)
             if j is None:
                 if name not in ignored:
                     unknown.add(name)
                 continue
-            parts.setdefault(j, []).append((rows, block[:, k], speeds[:, k]))
+            parts.setdefault(j, []).append((rows, positions[:, k], velocities[:, k]))
     columns = {}
     for j, pieces in parts.items():
         rows, qs, vs = (np.concatenate(x) for x in zip(*pieces, strict=True))
@@ -140,8 +126,9 @@ def _model(reader: Any, urdf: str | None) -> RobotModel:
         c for c in reader.connections if c.msgtype == topics.STRING_TYPE and c.topic.endswith("robot_description")
     ]
     text = None
-    for _, _, raw in reader.messages(connections=connections):
-        text = typestore().deserialize_cdr(raw, topics.STRING_TYPE).data
+    if connections:  # (no connections would mean every message of the recording to rosbags)
+        for _, _, raw in reader.messages(connections=connections):
+            text = cdr.decode_string(raw)
     if text is None:
         raise InputError("no --urdf given and no robot_description topic in the recording")
     try:

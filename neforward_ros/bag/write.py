@@ -4,20 +4,20 @@ from __future__ import annotations
 
 import os
 import shutil
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from neforward_ros.bag.compute import Batch
 from neforward_ros.bag.options import BagOptions
+from neforward_ros.model import RobotModel
 from neforward_ros.node import messages, topics
 from neforward_ros.node.messages import per_link_messages
 from neforward_ros.node.names import NodeNames
+from neforward_ros.node.result import Result
 from neforward_ros.node.topics import COM_STATES, LINK_STATES, output_list
 from neforward_ros.wire import cdr
-from neforward_ros.wire.rostypes import typestore
+from neforward_ros.wire.rostypes import facts
 
 
 def output_topics(options: BagOptions) -> list[tuple[str, str]]:
@@ -26,65 +26,90 @@ def output_topics(options: BagOptions) -> list[tuple[str, str]]:
     return [(names.resolve(o.topic), o.type) for o in output_list(options.accel_links, options.imu_links, False)]
 
 
-def write_bag(output: Path, batch: Batch, options: BagOptions, progress: Callable[[str, float], None]) -> list[str]:
-    from rosbags.rosbag2 import StoragePlugin, Writer
+class RecordingWriter:
+    """A rosbag2 recording written chunk by chunk, inside a staging folder until :meth:`finish`.
 
-    result = batch.result
-    count = len(batch.log_times)
-    first = result.sample(0)
-    prefix = options.frame_prefix
-    names = NodeNames()
-    rows: dict[str, Any] = {}
-    for topic, builder, blocks in (
-        (LINK_STATES, messages.link_states, messages.link_states_blocks),
-        (COM_STATES, messages.com_states, messages.com_states_blocks),
-    ):
-        template = cdr.encode(topics.LINK_STATES_TYPE, builder(first, prefix))
-        rows[names.resolve(topic)] = cdr.MultiDofTemplate(template).encode_many(result.stamp_ns, *blocks(result))
-    per_link = bool(options.accel_links or options.imu_links)
-    storage = StoragePlugin.MCAP if options.storage == "mcap" else StoragePlugin.SQLITE3
-    # Written inside a temporary folder under its final name (rosbag2 names the storage file after
-    # the folder), then moved into place: no half-written recording under the output name.
-    staging = output.with_name(f".{output.name}.partial-{os.getpid()}")
-    if staging.exists():
-        shutil.rmtree(staging)
-    staging.mkdir(parents=True)
-    partial = staging / output.name
-    try:
-        writer = Writer(partial, version=9, storage_plugin=storage)
-        with writer:
-            store = typestore()
-            connections = {
-                topic: writer.add_connection(topic, kind, typestore=store) for topic, kind in output_topics(options)
+    rosbag2 names the storage file after the recording's folder, so the recording is written in
+    ``<staging>/<name>`` and moved to its place by the caller once everything else is written too.
+
+    Args:
+        output: the recording's final path (its parent must exist).
+        options: topics and storage.
+        model: the robot (per-link topics name its links).
+    """
+
+    def __init__(self, output: Path, options: BagOptions, model: RobotModel) -> None:
+        from rosbags.rosbag2 import StoragePlugin, Writer
+
+        self.options = options
+        self.names = NodeNames()
+        self.staging = output.with_name(f".{output.name}.partial-{os.getpid()}")
+        if self.staging.exists():
+            shutil.rmtree(self.staging)
+        self.staging.mkdir()
+        self.path = self.staging / output.name
+        storage = StoragePlugin.MCAP if options.storage == "mcap" else StoragePlugin.SQLITE3
+        self.writer = Writer(self.path, version=9, storage_plugin=storage)
+        self.writer.open()
+        self.connections = {
+            topic: self.writer.add_connection(topic, kind, msgdef=facts(kind)["msgdef"], rihs01=facts(kind)["rihs01"])
+            for topic, kind in output_topics(options)
+        }
+        self.topics = [topic for topic, _ in output_topics(options)]
+        self._templates: dict[str, cdr.MultiDofTemplate] = {}
+
+    def write(self, result: Result, log_times: np.ndarray) -> None:
+        """One chunk of results, each recorded at its joint state's recording time."""
+        options, names = self.options, self.names
+        prefix = options.frame_prefix
+        if not self._templates:
+            first = result.sample(0)
+            self._templates = {
+                names.resolve(LINK_STATES): cdr.MultiDofTemplate(
+                    cdr.encode(topics.LINK_STATES_TYPE, messages.link_states(first, prefix))
+                ),
+                names.resolve(COM_STATES): cdr.MultiDofTemplate(
+                    cdr.encode(topics.LINK_STATES_TYPE, messages.com_states(first, prefix))
+                ),
             }
-            log_times = batch.log_times.tolist()
-            streams = [(connections[topic], data) for topic, data in rows.items()]
-            batched = not per_link and _FAST_MCAP and _write_rows_mcap(writer, streams, batch.log_times, progress)
-            flat = [(connection, memoryview(data.reshape(-1)), data.shape[1]) for connection, data in streams]
-            for i in range(0 if batched else count):
-                for connection, view, size in flat:
-                    writer.write(connection, log_times[i], view[i * size : (i + 1) * size])
-                if per_link:
-                    sample = result.sample(i)
-                    for topic, contents in per_link_messages(sample, options.accel_links, options.imu_links, prefix):
-                        connection = connections[names.resolve(topic)]
-                        writer.write(connection, log_times[i], cdr.encode(connection.msgtype, contents))
-                if i % 2048 == 0:
-                    progress("writing", i / count)
-        progress("writing", 1.0)
-        partial.rename(output)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-    return [topic for topic, _ in output_topics(options)]
+        link_blocks, com_blocks = result.blocks
+        streams = [
+            (self.connections[topic], self._templates[topic].encode_many(result.stamp_ns, *blocks))
+            for topic, blocks in zip(self._templates, (link_blocks, com_blocks), strict=True)
+        ]
+        per_link = bool(options.accel_links or options.imu_links)
+        if not per_link and _FAST_MCAP and _write_rows_mcap(self.writer, streams, log_times):
+            return
+        times = log_times.tolist()
+        flat = [(connection, memoryview(data.reshape(-1)), data.shape[1]) for connection, data in streams]
+        for i, log_time in enumerate(times):
+            for connection, view, size in flat:
+                self.writer.write(connection, log_time, view[i * size : (i + 1) * size])
+            if per_link:
+                sample = result.sample(i)
+                for topic, contents in per_link_messages(sample, options.accel_links, options.imu_links, prefix):
+                    connection = self.connections[names.resolve(topic)]
+                    self.writer.write(connection, log_time, cdr.encode(connection.msgtype, contents))
+
+    def finish(self) -> Path:
+        """Close the recording; returns where it is (inside the staging folder)."""
+        self.writer.close()
+        return self.path
+
+    def discard(self) -> None:
+        """Forget everything written (after an error or an interrupt)."""
+        try:
+            self.writer.close()
+        except Exception:  # a half-written storage may not close cleanly; it is deleted anyway
+            pass
+        shutil.rmtree(self.staging, ignore_errors=True)
 
 
 _FAST_MCAP = True  # tests turn it off to compare with rosbags' own per-message writing
 _CHUNK_BYTES = 2**20  # as rosbags' MCAP writer
 
 
-def _write_rows_mcap(
-    writer: Any, streams: list[tuple[Any, np.ndarray]], log_times: np.ndarray, progress: Callable[[str, float], None]
-) -> bool:
+def _write_rows_mcap(writer: Any, streams: list[tuple[Any, np.ndarray]], log_times: np.ndarray) -> bool:
     """Write equal-length messages straight into rosbags' MCAP chunks, many at a time.
 
     Produces what rosbags' ``Writer.write`` produces message by message (message records of
@@ -143,15 +168,4 @@ def _write_rows_mcap(
         writer.max_timestamp = max(writer.max_timestamp, high)
         if chunk.bio.tell() > _CHUNK_BYTES:
             storage.close_chunk()
-        progress("writing", part.stop / count)
     return True
-
-
-def atomic(path: Path, write: Callable[[Path], None]) -> None:
-    partial = path.with_name(f".{path.name}.partial-{os.getpid()}{path.suffix}")
-    try:
-        write(partial)
-        partial.rename(path)
-    except BaseException:
-        partial.unlink(missing_ok=True)
-        raise

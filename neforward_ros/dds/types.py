@@ -13,8 +13,7 @@ from typing import Any
 from cyclonedds.idl import IdlStruct, make_idl_struct
 from cyclonedds.idl import types as idl
 
-from neforward_ros.errors import InputError
-from neforward_ros.wire.rostypes import typestore
+from neforward_ros.wire.rostypes import facts
 
 _BASE = {
     "bool": bool,
@@ -41,24 +40,24 @@ def dds_type_name(typename: str) -> str:
 
 def type_hash(typename: str) -> str:
     """The ROS 2 type hash (``RIHS01_<hex>``) of a message type, as ROS 2 Jazzy computes it."""
-    return typestore().hash_rihs01(typename)
+    return facts(typename)["rihs01"]
 
 
 @cache
 def dds_type(typename: str) -> type[IdlStruct]:
     """The Cyclone DDS struct class of a ROS 2 message type."""
-    store = typestore()
-    if typename not in store.fielddefs:
-        raise InputError(f"unknown ROS 2 message type {typename!r}")
-    _, fields = store.fielddefs[typename]
-    members = {name: _member_type(nodetype, description) for name, (nodetype, description) in fields}
+    definitions = facts(typename)["fields"]
+    members = {
+        name: _member_type(nodetype, description, definitions)
+        for name, (nodetype, description) in definitions[typename]
+    }
     if not members:  # an empty ROS message has one uint8 placeholder member on the wire
         members = {"structure_needs_at_least_one_member": idl.uint8}
     class_name = typename.replace("/", "_")
     return make_idl_struct(class_name, dds_type_name(typename), members)
 
 
-def _member_type(nodetype: Any, description: Any) -> Any:
+def _member_type(nodetype: Any, description: Any, definitions: Any) -> Any:
     kind = int(nodetype)  # rosbags Nodetype: BASE 1, NAME 2, ARRAY 3, SEQUENCE 4
     if kind == 2:
         return dds_type(description)
@@ -68,7 +67,7 @@ def _member_type(nodetype: Any, description: Any) -> Any:
             return idl.bounded_str[bound] if bound else str
         return _BASE[base]
     (element_type, element_description), length = description
-    element = _member_type(element_type, element_description)
+    element = _member_type(element_type, element_description, definitions)
     if kind == 3:
         return idl.array[element, length]
     return idl.sequence[element, length] if length else idl.sequence[element]

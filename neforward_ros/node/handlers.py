@@ -52,7 +52,7 @@ class MessageHandlers:
         """A sensor_msgs/JointState, as CDR bytes."""
         self.messages_in += 1
         try:
-            stamp, names, positions, velocities = cdr.decode_joint_state(data)
+            stamp, names, positions, velocities, _ = cdr.decode_joint_state(data)
             results = self.pipeline.on_joint_state(stamp, names, positions, velocities, receive_ns=receive_ns)
         except Exception as exc:
             self._dropped("joint state", exc)
@@ -78,7 +78,7 @@ class MessageHandlers:
     def on_description(self, data: bytes) -> None:
         """A std_msgs/String robot description, as CDR bytes: replaces the model when valid."""
         try:
-            self.pipeline.set_description(deserialize(topics.STRING_TYPE, data)["data"])
+            self.pipeline.set_description(cdr.decode_string(data))
         except Exception as exc:
             self._dropped("robot description", exc)
 

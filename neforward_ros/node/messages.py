@@ -25,8 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from neforward_ros.kernel import SLICES
-from neforward_ros.node.result import Result
+from neforward_ros.node.result import Blocks, Result
 from neforward_ros.node.settings import NodeSettings
 from neforward_ros.node.topics import (
     COM_STATES,
@@ -57,47 +56,15 @@ def vector3(v: np.ndarray) -> Message:
     return {"x": x, "y": y, "z": z}
 
 
-# Columns of the recursion's rows (kernel.SLICES) that the two MultiDOF messages take.
-_ROTATED = ("velocity", "omega", "accel", "alpha", "com_velocity", "com_accel")
-_ROTATED_COLUMNS = np.concatenate([np.arange(SLICES[name].start, SLICES[name].stop) for name in _ROTATED])
-_LINK_POSE = np.r_[SLICES["position"], SLICES["orientation"]]
-_COM_POSE = np.r_[SLICES["com_position"], SLICES["orientation"]]
-_W = SLICES["orientation"].stop - 1
-_COM_VELOCITIES = np.r_[12:15, 3:6]  # of the 18 rotated numbers: com_velocity, omega
-_COM_ACCELERATIONS = np.r_[15:18, 9:12]  # com_accel, alpha
-
-Blocks = tuple[np.ndarray, np.ndarray, np.ndarray]
-
-
-def state_blocks(result: Result) -> tuple[Blocks, Blocks]:
-    """The numbers of link_states and of com_states, in one pass over the recursion's rows: for each,
-    transforms (..., n, 7) = translation, rotation (x, y, z, w); velocities (..., n, 6) = linear,
-    angular; accelerations likewise. The six vectors of each link are rotated into root axes by one
-    matmul. Works on batched results too."""
-    table = result.table
-    shape = table.shape[:-1]
-    rotation = table[..., SLICES["rotation"]].reshape(*shape, 3, 3)
-    vectors = table[..., _ROTATED_COLUMNS].reshape(*shape, 6, 3)
-    rotated = np.matmul(vectors, np.swapaxes(rotation, -1, -2)).reshape(*shape, 18)  # rows (R v)^T
-    sign = np.copysign(1.0, table[..., _W : _W + 1])  # quaternions with w >= 0
-    link_pose, com_pose = table[..., _LINK_POSE], table[..., _COM_POSE]
-    link_pose[..., 3:] *= sign
-    com_pose[..., 3:] *= sign
-    return (
-        (link_pose, rotated[..., 0:6], rotated[..., 6:12]),
-        (com_pose, rotated[..., _COM_VELOCITIES], rotated[..., _COM_ACCELERATIONS]),
-    )
-
-
 def link_states_blocks(result: Result) -> Blocks:
     """link_states' transforms (n, 7), velocities (n, 6), accelerations (n, 6): pose of each link frame,
     (v, omega) and (specific force, alpha) of its origin, along the root axes."""
-    return state_blocks(result)[0]
+    return result.blocks[0]
 
 
 def com_states_blocks(result: Result) -> Blocks:
     """The same for each link's centre of mass (its pose has the link's rotation)."""
-    return state_blocks(result)[1]
+    return result.blocks[1]
 
 
 def _quaternion(q: np.ndarray) -> Message:
@@ -266,7 +233,7 @@ class Encoder:
             }
             self._names = result.link_names
         stamp = result.stamp_ns
-        link_blocks, com_blocks = state_blocks(result)
+        link_blocks, com_blocks = result.blocks
         out = [
             (LINK_STATES, self._templates[LINK_STATES].encode(stamp, *link_blocks)),
             (COM_STATES, self._templates[COM_STATES].encode(stamp, *com_blocks)),

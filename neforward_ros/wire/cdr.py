@@ -12,7 +12,7 @@ bytes against rosbags' own serializer.
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
 from typing import Any
@@ -22,7 +22,7 @@ import numpy as np
 from neforward_ros.errors import InputError
 from neforward_ros.stamps import split_stamp
 from neforward_ros.wire.rostypes import PRIMITIVES as _PRIMITIVES
-from neforward_ros.wire.rostypes import typestore
+from neforward_ros.wire.rostypes import facts
 
 HEADER = b"\x00\x01\x00\x00"  # CDR_LE encapsulation, options 0
 _STAMP = struct.Struct("<iI")
@@ -55,9 +55,7 @@ def warm_up(typename: str) -> None:
 
 @cache
 def _encoder(typename: str) -> Callable[[bytearray, Mapping[str, Any]], None]:
-    if typename not in typestore().fielddefs:
-        raise InputError(f"unknown ROS 2 message type {typename!r}")
-    generator = _Generator()
+    generator = _Generator(facts(typename)["fields"])
     generator.struct(typename, "v", 1)
     source = "def encode(buf, v):\n" + "\n".join(generator.lines) + "\n    return None\n"
     namespace: dict[str, Any] = {"_ZEROS": _ZEROS, "_EMPTY": _EMPTY, "_check_length": _check_length}
@@ -75,7 +73,8 @@ def _check_length(values: Any, length: int, where: str) -> Any:
 class _Generator:
     """Emits the body of an encoder as Python source lines."""
 
-    def __init__(self) -> None:
+    def __init__(self, definitions: Mapping[str, list]) -> None:
+        self.definitions = definitions  # type name -> field definitions (rostypes.facts)
         self.lines: list[str] = []
         self.constants: dict[str, Any] = {}
         self._names = 0
@@ -100,7 +99,7 @@ class _Generator:
 
     def struct(self, typename: str, var: str, depth: int) -> None:
         """Code that appends the members of ``typename`` held in the dict named ``var``."""
-        _, fields = typestore().fielddefs[typename]
+        fields = self.definitions[typename]
         if not fields:
             self._emit(depth, "buf += b'\\x00'")
             return
@@ -248,15 +247,14 @@ def decode_multi_dof(data: bytes) -> MultiDofPoint:
 _last_names: tuple[bytes, tuple[str, ...]] = (b"", ())
 
 
-def decode_joint_state(data: bytes) -> tuple[int, tuple[str, ...], np.ndarray, np.ndarray]:
-    """(stamp ns, names, positions, velocities) of sensor_msgs/JointState CDR bytes, without message objects.
+def _joint_state_layout(data: bytes) -> tuple[int, tuple[str, ...], list[tuple[int, int]]]:
+    """(stamp ns, names, [(offset, count) of position, velocity, effort]) of JointState CDR bytes.
 
-    For reading recordings of tens of thousands of joint states: when the names are byte for byte
-    those of the previous message (the usual case), they are not decoded again. Missing velocities
-    are an empty array.
+    When the names are byte for byte those of the previous message (the usual case), they are not
+    decoded again.
 
     Raises:
-        InputError: not little-endian CDR or truncated.
+        InputError: not little-endian CDR, truncated or malformed.
     """
     global _last_names
     if data[:2] != HEADER[:2]:
@@ -279,18 +277,115 @@ def decode_joint_state(data: bytes) -> tuple[int, tuple[str, ...], np.ndarray, n
                 decoded.append(name)
             names = tuple(decoded)
             _last_names = (bytes(data[start:position]), names)
-        arrays = []
-        for _ in range(2):
+        fields = []
+        for _ in range(3):
             position += -(position - 4) & 3
             (n,) = struct.unpack_from("<I", data, position)
             position += 4
             if n:
                 position += -(position - 4) & 7
-            arrays.append(np.frombuffer(data, dtype="<f8", count=n, offset=position))
+            if position + 8 * n > len(data):
+                raise InputError(f"truncated JointState: {n} values at offset {position} of {len(data)} bytes")
+            fields.append((position, n))
             position += 8 * n
     except (struct.error, ValueError, UnicodeDecodeError) as exc:
         raise InputError(f"truncated or malformed JointState: {exc}") from exc
-    return sec * 1_000_000_000 + nanosec, names, arrays[0], arrays[1]
+    return sec * 1_000_000_000 + nanosec, names, fields
+
+
+def decode_joint_state(data: bytes) -> tuple[int, tuple[str, ...], np.ndarray, np.ndarray, np.ndarray]:
+    """(stamp ns, names, positions, velocities, efforts) of sensor_msgs/JointState CDR bytes, without
+    message objects. Fields the message leaves empty are empty arrays.
+
+    Raises:
+        InputError: not little-endian CDR, truncated or malformed.
+    """
+    stamp, names, fields = _joint_state_layout(data)
+    positions, velocities, efforts = (np.frombuffer(data, dtype="<f8", count=n, offset=o) for o, n in fields)
+    return stamp, names, positions, velocities, efforts
+
+
+@dataclass
+class JointStateBatch:
+    """Many JointState messages decoded at once: per list of names, the messages that carry it.
+
+    Attributes:
+        stamps: (M,) header stamps, integer nanoseconds, of every message (malformed ones too).
+        groups: names -> (message indices, positions (k, n), velocities (k, n) with NaN where a
+            message has none, efforts likewise).
+        malformed: indices of messages whose names and positions differ in length (dropped, as the
+            node drops them).
+    """
+
+    stamps: np.ndarray
+    groups: dict[tuple[str, ...], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+    malformed: list[int]
+
+
+def decode_joint_states(messages: Sequence[bytes]) -> JointStateBatch:
+    """Decode a recording's JointState messages in bulk.
+
+    Messages laid out byte for byte like the one before them up to their numbers (same frame_id,
+    names and lengths: the usual case) are decoded together, as one numpy array of rows; the others
+    one by one.
+
+    Raises:
+        InputError: a message that is not little-endian CDR, or truncated.
+    """
+    stamps = np.zeros(len(messages), dtype=np.int64)
+    layouts: dict[tuple[int, bytes], tuple[tuple[str, ...], list[tuple[int, int]], list[int]]] = {}
+    malformed: list[int] = []
+    key: tuple[int, bytes] | None = None
+    prefix_end = 0
+    for index, data in enumerate(messages):
+        if key is not None and len(data) == key[0] and data[12:prefix_end] == key[1]:
+            layouts[key][2].append(index)
+            continue
+        _, names, fields = _joint_state_layout(data)
+        if fields[0][1] != len(names):
+            malformed.append(index)
+            key = None
+            continue
+        prefix_end = fields[0][0]
+        key = (len(data), bytes(data[12:prefix_end]))
+        layouts.setdefault(key, (names, fields, []))[2].append(index)
+    parts: dict[tuple[str, ...], list[tuple[np.ndarray, ...]]] = {}
+    for (size, _), (names, fields, indices) in layouts.items():
+        rows = np.frombuffer(b"".join(messages[i] for i in indices), dtype=np.uint8).reshape(len(indices), size)
+        index = np.asarray(indices, dtype=np.int64)
+        sec = rows[:, 4:8].copy().view("<i4")[:, 0].astype(np.int64)
+        nanosec = rows[:, 8:12].copy().view("<u4")[:, 0].astype(np.int64)
+        stamps[index] = sec * 1_000_000_000 + nanosec
+        width = len(names)
+        values = []
+        for offset, n in fields:
+            if n == width:
+                values.append(rows[:, offset : offset + 8 * n].copy().view("<f8"))
+            else:  # empty (or of another length: ignored, as the node ignores it)
+                values.append(np.full((len(indices), width), np.nan))
+        parts.setdefault(names, []).append((index, *values))
+    groups = {}
+    for names, pieces in parts.items():
+        index, *values = (np.concatenate(x) for x in zip(*pieces, strict=True))
+        order = np.argsort(index, kind="stable")
+        groups[names] = (index[order], *(v[order] for v in values))
+    for index in malformed:
+        stamps[index] = _joint_state_layout(messages[index])[0]
+    return JointStateBatch(stamps, groups, malformed)
+
+
+def decode_string(data: bytes) -> str:
+    """The text of a std_msgs/String, from its CDR bytes.
+
+    Raises:
+        InputError: not little-endian CDR, or truncated.
+    """
+    if data[:2] != HEADER[:2]:
+        raise InputError("not little-endian CDR (encapsulation 0x0001)")
+    try:
+        return _string(data, 4)[0]
+    except (struct.error, UnicodeDecodeError) as exc:
+        raise InputError(f"truncated or malformed String: {exc}") from exc
 
 
 def _string(data: bytes, position: int) -> tuple[str, int]:
