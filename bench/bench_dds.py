@@ -151,13 +151,29 @@ def measure(peer_domain: int, output_topic: str, output_type: str, names: list[s
     return np.array(stamps, dtype=np.int64), received
 
 
+def reach(stamps: np.ndarray, lag_ns: int) -> np.ndarray:
+    """How far each input's arrival lets the node's estimates go: its stamp, plus, with a lag, half the
+    shortest of the last 8 stamp intervals (the node's rule, ``StreamingEstimator._tolerance``)."""
+    out = stamps.copy()
+    if lag_ns:
+        intervals = np.diff(stamps, prepend=stamps[0])
+        windows = np.lib.stride_tricks.sliding_window_view(np.r_[np.full(7, intervals[1]), intervals[1:]], 8)
+        out[1:] += windows.min(axis=1) // 2
+    return np.maximum.accumulate(out)
+
+
 def latencies(stamps: np.ndarray, received: list[tuple[int, int]], lag_ns: int) -> np.ndarray:
-    """ms from the input that completed each output (the first input at least lag_ns after it)."""
+    """ms from the input that completed each output: the first whose reach is the output's stamp plus the lag."""
     if not received:
         return np.array([np.nan])
     arrival, output = (np.array(x, dtype=np.int64) for x in zip(*received, strict=True))
-    trigger = stamps[np.minimum(np.searchsorted(stamps, output + lag_ns), len(stamps) - 1)]
+    trigger = stamps[np.minimum(np.searchsorted(reach(stamps, lag_ns), output + lag_ns), len(stamps) - 1)]
     return (arrival - trigger) / 1e6
+
+
+def expected_outputs(stamps: np.ndarray, lag_ns: int) -> int:
+    """Outputs the node gives for these inputs (a fixed lag holds back the last lag's worth)."""
+    return int(np.sum(stamps + lag_ns <= reach(stamps, lag_ns)[-1]))
 
 
 def start(command: list[str]) -> subprocess.Popen:
@@ -221,7 +237,7 @@ def main() -> None:
                             stop(process)
                         lag_ns = round(lag_s * 1e9) if what == "node" else 0
                         values = latencies(stamps, received, lag_ns)
-                        expected = len(stamps) if what == "floor" else int(np.sum(stamps <= stamps[-1] - lag_ns))
+                        expected = expected_outputs(stamps, lag_ns)
                         if what == "node" and mode == "causal":  # the first inputs: too few samples
                             expected -= 1 if kind == "velocities" else 2
                         results[what] = (*np.percentile(values, [50, 99]), expected - len(received), expected)

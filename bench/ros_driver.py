@@ -41,10 +41,10 @@ def drive(arguments: argparse.Namespace) -> None:
     node = Node("bench_driver")
     deep = QoSProfile(depth=100_000)
     publisher = node.create_publisher(JointState, "/joint_states", deep)
-    latencies: list[float] = []
+    received: list[tuple[int, int]] = []
 
     def take(data: bytes) -> None:
-        latencies.append((time.time_ns() - stamp_of(data)) / 1e6)
+        received.append((time.time_ns(), stamp_of(data)))
 
     subscription = node.create_subscription(JointState if arguments.topic == "/echo" else MultiDOFJointTrajectory,
                                             arguments.topic, take, deep, raw=True)  # fmt: skip
@@ -69,6 +69,7 @@ def drive(arguments: argparse.Namespace) -> None:
     thread.start()
     names = arguments.names.split(",")
     count = int(arguments.rate * arguments.seconds)
+    stamps = []
     start = time.monotonic()
     for k in range(count):
         delay = start + k / arguments.rate - time.monotonic()
@@ -79,10 +80,11 @@ def drive(arguments: argparse.Namespace) -> None:
         now = time.time_ns()
         message.header.stamp = Time(sec=now // NS, nanosec=now % NS)
         publisher.publish(message)
+        stamps.append(now)
     time.sleep(1.5)
     spinning.set()
     thread.join(timeout=5)
-    print(json.dumps({"sent": count, "received": len(latencies), "latencies": latencies}))
+    print(json.dumps({"stamps": stamps, "received": received}))
     node.destroy_node()
     rclpy.try_shutdown()
 

@@ -287,6 +287,7 @@ class StreamingEstimator:
         self._window_ns = round(self.settings.window * NS)
         self._keep_ns = round((self.settings.window + self.settings.effective_lag) * NS) + self._gap_ns
         self._pending: deque[int] = deque()
+        self._intervals: deque[int] = deque(maxlen=8)  # the last stamp intervals, ns
         self._clock: int | None = None
         self._origin = 0
         self.segment = 0
@@ -324,7 +325,16 @@ class StreamingEstimator:
         self._groups = []
         self._group_of = [None] * len(self.joint_names)
         self._pending.clear()
+        self._intervals.clear()
         self._clock = None
+
+    def _tolerance(self) -> int:
+        """How much earlier than ``lag`` a fixed-lag estimate may leave: half the shortest of the last
+        stamp intervals. Stamps jitter, so the sample nominally ``lag`` later often comes a little
+        early; waiting for the one after would delay the estimate by a whole period, and then let
+        two leave together. The next sample comes later than ``lag`` anyway (it is more than half an
+        interval away), so the fit's window holds exactly the samples it would hold then."""
+        return min(self._intervals) // 2 if self._lag_ns and self._intervals else 0
 
     def ages(self, now_ns: int | None = None) -> np.ndarray:
         """Seconds since each joint's newest sample (at ``now_ns``, default the newest stamp); inf if none."""
@@ -376,9 +386,11 @@ class StreamingEstimator:
         if not self._add(stamp, samples):
             return out
         if new_target:
+            if self._pending or self._targets:
+                self._intervals.append(stamp - self._clock)
             self._clock = stamp
             self._pending.append(stamp)
-            out.extend(self._estimate(target) for target in self._drain(stamp - self._lag_ns))
+            out.extend(self._estimate(target) for target in self._drain(stamp - self._lag_ns + self._tolerance()))
             self._targets += 1
             if self._targets % 32 == 0:  # forget old samples now and then
                 for group in self._groups:
@@ -562,22 +574,32 @@ class StreamingEstimator:
             fitted_velocities = int(by_velocity.sum())
         if len(stamps) < 3 and not fitted_velocities:
             return  # too few samples to differentiate positions twice
-        values = np.concatenate([positions, velocities[:, by_velocity]], axis=1) if fitted_velocities else positions
         times = group.seconds[lo:hi]
         target_s = (target - self._origin) / NS
+        exact = age_ns == 0  # the target is a sample of this group: its own position is used as it is
+        if fitted_velocities and exact:
+            # One column per joint: its velocities where it has them all, else its positions.
+            values = np.where(by_velocity, velocities, positions)
+        elif fitted_velocities:  # positions are fitted too, to be estimated between samples
+            values = np.concatenate([positions, velocities[:, by_velocity]], axis=1)
+        else:
+            values = positions
         if settings.method == "difference":
             fitted, d1, d2 = local_difference(times, values, target_s, lead_ns / NS)
         else:
             fitted, d1, d2 = fit_at(times, values, target_s, settings.window / 2.0, settings.order, lead_ns / NS)
         m = len(members)
-        velocity, acceleration = d1[:m], d2[:m]
-        if fitted_velocities:
-            velocity, acceleration = velocity.copy(), acceleration.copy()
-            velocity[by_velocity], acceleration[by_velocity] = fitted[m:], d1[m:]
-        if age_ns == 0:  # the sample itself rather than a fit, for what the message gave
+        if fitted_velocities and exact:
+            velocity, acceleration = np.where(by_velocity, fitted, d1), np.where(by_velocity, d1, d2)
+        else:
+            velocity, acceleration = d1[:m], d2[:m]
+            if fitted_velocities:
+                velocity, acceleration = velocity.copy(), acceleration.copy()
+                velocity[by_velocity], acceleration[by_velocity] = fitted[m:], d1[m:]
+        if exact:
             position = positions[k - lo]
             given = velocities[k - lo]
-            velocity = np.where(np.isfinite(given), given, velocity)
+            velocity = np.where(np.isfinite(given), given, velocity)  # a message velocity is kept as given
         else:
             position = fitted[:m]
         if len(stamps) >= 3:
