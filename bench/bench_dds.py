@@ -176,6 +176,23 @@ def expected_outputs(stamps: np.ndarray, lag_ns: int) -> int:
     return int(np.sum(stamps + lag_ns <= reach(stamps, lag_ns)[-1]))
 
 
+def summary(stamps: np.ndarray, received: list[tuple[int, int]], lag_ns: int, unready: int) -> tuple:
+    """(p50 ms, p99 ms, outputs lost, outputs expected); ``unready``: leading inputs too few for an estimate."""
+    expected = expected_outputs(stamps, lag_ns) - unready
+    p50, p99 = np.percentile(latencies(stamps, received, lag_ns), [50, 99])
+    return p50, p99, expected - len(received), expected
+
+
+def print_row(labels: list[str], floor: tuple, node: tuple) -> None:
+    """One table row: the labels, the floor's and the node's p50 / p99, the node above the floor, losses."""
+    (f50, f99, _, _), (n50, n99, lost, expected) = floor, node
+    print(
+        " ".join(labels) + f" {f50:>10.2f} {f99:>6.2f} {n50:>9.2f} {n99:>6.2f} {n50 - f50:>12.2f}"
+        f" {f'{lost} of {expected}':>10}",
+        flush=True,
+    )
+
+
 def start(command: list[str]) -> subprocess.Popen:
     return subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=os.environ.copy())
 
@@ -236,17 +253,11 @@ def main() -> None:
                         finally:
                             stop(process)
                         lag_ns = round(lag_s * 1e9) if what == "node" else 0
-                        values = latencies(stamps, received, lag_ns)
-                        expected = expected_outputs(stamps, lag_ns)
-                        if what == "node" and mode == "causal":  # the first inputs: too few samples
-                            expected -= 1 if kind == "velocities" else 2
-                        results[what] = (*np.percentile(values, [50, 99]), expected - len(received), expected)
-                    (f50, f99, _, _), (n50, n99, lost, expected) = results["floor"], results["node"]
-                    print(
-                        f"{label.split()[0]:<10} {mode:<10} {kind:<11} {rate:>6.0f} {f50:>10.2f} {f99:>6.2f} "
-                        f"{n50:>9.2f} {n99:>6.2f} {n50 - f50:>12.2f} {f'{lost} of {expected}':>10}",
-                        flush=True,
-                    )
+                        # causal: the first inputs are too few samples for an estimate
+                        unready = (1 if kind == "velocities" else 2) if what == "node" and mode == "causal" else 0
+                        results[what] = summary(stamps, received, lag_ns, unready)
+                    labels = [f"{label.split()[0]:<10}", f"{mode:<10}", f"{kind:<11}", f"{rate:>6.0f}"]
+                    print_row(labels, results["floor"], results["node"])
 
 
 if __name__ == "__main__":

@@ -46,7 +46,7 @@ def main() -> None:
     args = parser.parse_args()
     if not os.environ.get("NEFORWARD_ROS_PYTHON") and (ROOT / ".venv-ros" / "bin" / "python").exists():
         os.environ["NEFORWARD_ROS_PYTHON"] = str(ROOT / ".venv-ros" / "bin" / "python")
-    from bench_dds import expected_outputs, latencies
+    from bench_dds import print_row, summary
     from ros.ros_harness import Graph, Workspace, why_not_runnable
 
     from neforward_ros import load_model
@@ -109,17 +109,10 @@ def main() -> None:
                     stamps = np.array(measured["stamps"], dtype=np.int64)
                     received = [(int(a), int(b)) for a, b in measured["received"]]
                     lag = lag_ns if what == "node" else 0
-                    values = latencies(stamps, received, lag)
-                    expected = expected_outputs(stamps, lag)
-                    if what == "node" and mode == "causal":
-                        expected -= 2  # the first two inputs: too few samples for an estimate
-                    results[what] = (*np.percentile(values, [50, 99]), expected - len(received), expected)
-                (f50, f99, _, _), (n50, n99, lost, expected) = results["floor"], results["node"]
-                print(
-                    f"{label.split()[0]:<10} {mode:<10} {rate:>6.0f} {f50:>10.2f} {f99:>6.2f} {n50:>9.2f} {n99:>6.2f}"
-                    f" {n50 - f50:>12.2f} {f'{lost} of {expected}':>10}",
-                    flush=True,
-                )
+                    # causal: the first two inputs are too few samples for an estimate
+                    results[what] = summary(stamps, received, lag, 2 if what == "node" and mode == "causal" else 0)
+                labels = [f"{label.split()[0]:<10}", f"{mode:<10}", f"{rate:>6.0f}"]
+                print_row(labels, results["floor"], results["node"])
 
 
 if __name__ == "__main__":
