@@ -176,9 +176,17 @@ def expected_outputs(stamps: np.ndarray, lag_ns: int) -> int:
     return int(np.sum(stamps + lag_ns <= reach(stamps, lag_ns)[-1]))
 
 
-def summary(stamps: np.ndarray, received: list[tuple[int, int]], lag_ns: int, unready: int) -> tuple:
-    """(p50 ms, p99 ms, outputs lost, outputs expected); ``unready``: leading inputs too few for an estimate."""
-    expected = expected_outputs(stamps, lag_ns) - unready
+def warm_up_ns(mode: str) -> int:
+    """How long after the first input the node's default estimator in this mode gives its first estimate."""
+    from neforward_ros.estimation.stream import StreamSettings
+
+    return round(StreamSettings(mode=mode).support.before * 1e9)
+
+
+def summary(stamps: np.ndarray, received: list[tuple[int, int]], lag_ns: int, warm_up: int) -> tuple:
+    """(p50 ms, p99 ms, outputs lost, outputs expected); ``warm_up``: ns after the first input before
+    the first estimate (no output for the inputs before)."""
+    expected = expected_outputs(stamps, lag_ns) - int(np.count_nonzero(stamps < stamps[0] + warm_up))
     p50, p99 = np.percentile(latencies(stamps, received, lag_ns), [50, 99])
     return p50, p99, expected - len(received), expected
 
@@ -253,9 +261,8 @@ def main() -> None:
                         finally:
                             stop(process)
                         lag_ns = round(lag_s * 1e9) if what == "node" else 0
-                        # causal: the first inputs are too few samples for an estimate
-                        unready = (1 if kind == "velocities" else 2) if what == "node" and mode == "causal" else 0
-                        results[what] = summary(stamps, received, lag_ns, unready)
+                        warm_up = warm_up_ns(mode) if what == "node" else 0
+                        results[what] = summary(stamps, received, lag_ns, warm_up)
                     labels = [f"{label.split()[0]:<10}", f"{mode:<10}", f"{kind:<11}", f"{rate:>6.0f}"]
                     print_row(labels, results["floor"], results["node"])
 

@@ -46,7 +46,7 @@ def main() -> None:
     args = parser.parse_args()
     if not os.environ.get("NEFORWARD_ROS_PYTHON") and (ROOT / ".venv-ros" / "bin" / "python").exists():
         os.environ["NEFORWARD_ROS_PYTHON"] = str(ROOT / ".venv-ros" / "bin" / "python")
-    from bench_dds import print_row, summary
+    from bench_dds import print_row, summary, warm_up_ns
     from ros.ros_harness import Graph, Workspace, why_not_runnable
 
     from neforward_ros import load_model
@@ -109,8 +109,7 @@ def main() -> None:
                     stamps = np.array(measured["stamps"], dtype=np.int64)
                     received = [(int(a), int(b)) for a, b in measured["received"]]
                     lag = lag_ns if what == "node" else 0
-                    # causal: the first two inputs are too few samples for an estimate
-                    results[what] = summary(stamps, received, lag, 2 if what == "node" and mode == "causal" else 0)
+                    results[what] = summary(stamps, received, lag, warm_up_ns(mode) if what == "node" else 0)
                 labels = [f"{label.split()[0]:<10}", f"{mode:<10}", f"{rate:>6.0f}"]
                 print_row(labels, results["floor"], results["node"])
 

@@ -29,6 +29,10 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--urdf", help=f"URDF file (default: the bundled {DEFAULT_ROBOT})")
     demo.add_argument("--seconds", type=float, default=10.0, help="how long to publish, s (default 10)")
     demo.add_argument("--rate", type=float, default=500.0, help="joint-state rate, Hz (default 500)")
+    demo.add_argument(
+        "--method", choices=("polyfit", "kalman", "difference"), default="polyfit", help="estimator (default polyfit)"
+    )
+    demo.add_argument("--mode", choices=("fixed_lag", "causal"), default="fixed_lag", help="default fixed_lag")
     table = commands.add_parser("table", help="print every link's omega, alpha, accel, com_accel along a trajectory")
     table.add_argument("--urdf", help=f"URDF file (default: the bundled {DEFAULT_ROBOT})")
     table.add_argument("--seconds", type=float, default=1.0, help="trajectory duration in s (default 1)")
@@ -62,7 +66,34 @@ def build_parser() -> argparse.ArgumentParser:
     bag.add_argument("--accel-links", default="", help="comma-separated links that also get accel and twist topics")
     bag.add_argument("--imu-links", default="", help="comma-separated links that also get an imu topic")
     bag.add_argument("--gravity", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"), help="m/s^2")
+    bag.add_argument(
+        "--publish-policy",
+        choices=("partial", "wait", "hold"),
+        default="partial",
+        help="stamps where some joints have no estimate: partial writes the links they do not move (default), "
+        "wait writes nothing, hold holds joints with no sample near (see --hold)",
+    )
+    bag.add_argument(
+        "--hold",
+        action="append",
+        default=[],
+        metavar="JOINT=POSITION",
+        help="with --publish-policy hold: a joint's held position (others 0); repeat for more joints",
+    )
     return parser
+
+
+def _hold_positions(items: Sequence[str]) -> dict[str, float]:
+    positions = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        try:
+            positions[name.strip()] = float(value)
+        except ValueError:
+            raise NeforwardError(f"--hold takes JOINT=POSITION (a number), got {item!r}") from None
+        if not name.strip():
+            raise NeforwardError(f"--hold takes JOINT=POSITION, got {item!r}")
+    return positions
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -83,8 +114,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             if not (math.isfinite(args.seconds) and args.seconds > 0 and math.isfinite(args.rate) and args.rate > 0):
                 raise NeforwardError("--seconds and --rate must be positive numbers")
             from neforward_ros.demo.live import live_demo
+            from neforward_ros.estimation.stream import StreamSettings
 
-            return live_demo(args.seconds, args.urdf, args.rate)
+            estimator = StreamSettings(method=args.method, mode=args.mode)
+            return live_demo(args.seconds, args.urdf, args.rate, estimator)
         elif args.command == "run":
             from neforward_ros.dds.commands import run_node
 
@@ -99,6 +132,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 accel_links=tuple(filter(None, args.accel_links.split(","))),
                 imu_links=tuple(filter(None, args.imu_links.split(","))),
                 gravity=tuple(args.gravity) if args.gravity else DEFAULT_GRAVITY,
+                publish_policy=args.publish_policy,
+                hold_positions=_hold_positions(args.hold),
             )
             report = process_bag(
                 args.input, args.output, options, csv_path=args.csv, plot_path=args.plot, progress=Progress()

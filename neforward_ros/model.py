@@ -19,6 +19,7 @@ import os
 import xml.etree.ElementTree as ElementTree
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from types import MappingProxyType
 
 import numpy as np
@@ -114,6 +115,25 @@ class RobotModel:
     def mimic_joint_names(self) -> tuple[str, ...]:
         """Movable joints that follow another joint (not columns of q), in link order."""
         return tuple(j.name for j in self.parent_joints if j is not None and j.mimic_of is not None)
+
+    @cached_property
+    def driving_columns(self) -> np.ndarray:
+        """(n_links, n_joints) bool: whether column j of q moves link i, i.e. drives a joint on the path
+        from the root to it (a mimic joint counts as its leader's column). A link is determined by
+        the columns marked in its row."""
+        drives = np.zeros((len(self.link_names), len(self.joint_names)), dtype=bool)
+        for link, joint in enumerate(self.parent_joints):
+            if joint is None:
+                continue
+            drives[link] = drives[joint.parent_index]  # parents come before their children
+            if joint.q_index >= 0:
+                drives[link, joint.q_index] = True
+        drives.flags.writeable = False
+        return drives
+
+    def determined_links(self, known: np.ndarray) -> np.ndarray:
+        """Per link, whether every column that moves it is known; ``known`` (..., n_joints) bool."""
+        return ~np.any(self.driving_columns & ~np.asarray(known, dtype=bool)[..., None, :], axis=-1)
 
     @property
     def continuous_columns(self) -> tuple[bool, ...]:

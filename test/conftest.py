@@ -39,6 +39,7 @@ REQUIREMENTS = {
     "test_bag.py": ("rosbags", "pinocchio"),
     "test_cdr.py": ("hypothesis", "rosbags"),
     "test_dds_node.py": ("cyclonedds", "rosbags"),
+    "test_demo.py": ("cyclonedds",),
     "test_derivatives_stream.py": ("hypothesis",),
     "test_pipeline_messages.py": ("scipy", "rosbags", "pinocchio"),
     "test_recursion_pinocchio.py": ("pinocchio",),
@@ -74,6 +75,19 @@ def pytest_pycollect_makemodule(module_path, parent):
     node = _Unavailable.from_parent(parent, path=module_path)
     node.reason = "; ".join(f"{module} is not installed: {OPTIONAL[module]}" for module in absent)
     return node
+
+
+class LogRecorder:
+    """A log function (``log(level, message)``) that keeps what it is given."""
+
+    def __init__(self) -> None:
+        self.lines: list[tuple[int, str]] = []
+
+    def __call__(self, level: int, message: str) -> None:
+        self.lines.append((level, message))
+
+    def count(self, text: str) -> int:
+        return sum(text in message for _, message in self.lines)
 
 
 def assert_close(actual: np.ndarray, expected: np.ndarray, rel: float, what: str = "") -> None:

@@ -34,6 +34,9 @@ def record(path, *, seconds=4.0, velocities=False, storage=StoragePlugin.MCAP, d
     rng = np.random.default_rng(1)
     count = int(seconds * 500)
     t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
+    if "gap" in extra:  # 0.3 s without samples from there on
+        t = t[(t < extra["gap"]) | (t >= extra["gap"] + 0.3)]
+        count = len(t)
     q, qd, _ = trajectory(t)
     store = typestore()
     with Writer(path, version=9, storage_plugin=storage) as writer:
@@ -53,6 +56,12 @@ def record(path, *, seconds=4.0, velocities=False, storage=StoragePlugin.MCAP, d
                 log_time = EPOCH + run * 10**10 + round(t[k] * 1e9)
                 writer.write(joint_states, log_time, cdr.encode(topics.JOINT_STATE_TYPE, contents))
     return t
+
+
+def covered(t: np.ndarray) -> np.ndarray:
+    """The samples with an estimate: their 0.2 s window (0.1 s either side) inside the recording, up to
+    half a sample interval at the end (where the node emits a fixed-lag estimate)."""
+    return (t - 0.1 >= t[0]) & (t + 0.1 <= t[-1] + 0.5 * np.median(np.diff(t)))
 
 
 def read_output(path) -> dict[str, list]:
@@ -95,11 +104,12 @@ def check_against_pinocchio(link_states: list, com_states: list) -> None:
     "storage, velocities", [(StoragePlugin.MCAP, False), (StoragePlugin.SQLITE3, True), (StoragePlugin.MCAP, True)]
 )
 def test_outputs_match_pinocchio_on_the_analytic_trajectory(tmp_path, storage, velocities) -> None:
-    record(tmp_path / "in", storage=storage, velocities=velocities)
+    t = record(tmp_path / "in", storage=storage, velocities=velocities)
     assert main(["bag", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--imu-links", "panda_hand"]) == 0
     out = read_output(tmp_path / "out")
     assert set(out) == {"/neforward/link_states", "/neforward/com_states", "/neforward/panda_hand/imu"}
-    assert len(out["/neforward/link_states"]) == 2000
+    stamps = [cdr.decode_multi_dof(raw).stamp_ns for _, raw in out["/neforward/link_states"]]
+    assert stamps == (EPOCH + np.round(t[covered(t)] * 1e9).astype(np.int64)).tolist()
     check_against_pinocchio(out["/neforward/link_states"], out["/neforward/com_states"])
     log_time, raw = out["/neforward/panda_hand/imu"][0]
     imu = typestore().deserialize_cdr(raw, topics.IMU_TYPE)
@@ -141,30 +151,49 @@ def test_batched_messages_equal_the_node_message_building(tmp_path) -> None:
 
 
 def test_concatenated_runs_are_segments_each_estimated_on_its_own(tmp_path, capsys) -> None:
-    record(tmp_path / "in", runs=2, seconds=2.0)
+    t = record(tmp_path / "in", runs=2, seconds=2.0)
     assert main(["bag", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--urdf", str(PANDA)]) == 0
     printed = capsys.readouterr().out
     assert "2 segments" in printed and "segment 2: 1000 messages" in printed
     out = read_output(tmp_path / "out")
-    assert len(out["/neforward/link_states"]) == 2000
-    halves = out["/neforward/link_states"][:1000], out["/neforward/link_states"][1000:]
+    each = int(covered(t).sum())  # each run on its own: no estimate near either end of either
+    assert len(out["/neforward/link_states"]) == 2 * each
+    halves = out["/neforward/link_states"][:each], out["/neforward/link_states"][each:]
     for half, com in zip(
-        halves, (out["/neforward/com_states"][:1000], out["/neforward/com_states"][1000:]), strict=True
+        halves, (out["/neforward/com_states"][:each], out["/neforward/com_states"][each:]), strict=True
     ):
         check_against_pinocchio(half, com)
 
 
+def test_no_output_whose_window_reaches_into_a_gap(tmp_path) -> None:
+    t = record(tmp_path / "in", seconds=3.0, gap=1.5)
+    process_bag(tmp_path / "in", tmp_path / "out", BagOptions())
+    stamps = np.array(
+        [cdr.decode_multi_dof(raw).stamp_ns for _, raw in read_output(tmp_path / "out")["/neforward/link_states"]]
+    )
+    out = (stamps - EPOCH) / 1e9
+    last_before, first_after = t[t < 1.5].max(), t[t >= 1.5].min()
+    before, after = out[out < 1.5], out[out >= 1.5]
+    # the 0.1 s either side of each output lies within the samples, give or take 1.5 sample intervals
+    assert before.max() + 0.1 <= last_before + 1.5 * 0.0022 and before.max() + 0.1 > last_before - 0.0022
+    assert after.min() - 0.1 >= first_after - 1e-9
+    check_against_pinocchio(
+        *(read_output(tmp_path / "out")[topic] for topic in ("/neforward/link_states", "/neforward/com_states"))
+    )
+
+
 def test_csv_and_plot(tmp_path) -> None:
-    record(tmp_path / "in", seconds=1.0)
+    t = record(tmp_path / "in", seconds=1.0)
     report = process_bag(
         tmp_path / "in", tmp_path / "out", BagOptions(), csv_path=tmp_path / "a.csv", plot_path=tmp_path / "a.png"
     )
-    assert report.samples_out == 500
+    count = int(covered(t).sum())
+    assert report.samples_out == count
     lines = (tmp_path / "a.csv").read_text().splitlines()
     header = lines[0].split(",")
     assert header[:2] == ["stamp_ns", "t[s]"]
     assert "panda_hand.accel_in_root.z[m/s^2]" in header and "panda_tcp.alpha_in_root.x[rad/s^2]" in header
-    assert len(lines) == 501 and len(lines[1].split(",")) == len(header)
+    assert len(lines) == count + 1 and len(lines[1].split(",")) == len(header)
     base = lines[1].split(",")
     assert float(base[header.index("panda_link0.accel_in_root.z[m/s^2]")]) == pytest.approx(9.81)
     assert (tmp_path / "a.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -197,9 +226,14 @@ def bad_cases(tmp_path):
             tmp_path / "o3",
         ),
         (
-            [str(tmp_path / "missing_joint"), "-o", str(tmp_path / "o4")],
+            [str(tmp_path / "missing_joint"), "-o", str(tmp_path / "o4"), "--publish-policy", "wait"],
             "missing from /joint_states: panda_finger_joint1",
             tmp_path / "o4",
+        ),
+        (
+            [str(tmp_path / "ok"), "-o", str(tmp_path / "o8"), "--publish-policy", "hold", "--hold", "ghost=1"],
+            "--hold names joints that robot 'panda' does not have: ghost",
+            tmp_path / "o8",
         ),
         ([str(tmp_path / "corrupt"), "-o", str(tmp_path / "o5")], "truncated or corrupt", tmp_path / "o5"),
         ([str(tmp_path / "ok"), "-o", str(tmp_path / "exists")], "exists already", None),
@@ -228,7 +262,7 @@ def test_bad_input_is_one_error_line_and_no_output(tmp_path, capsys) -> None:
 def test_batched_mcap_writing_equals_rosbags_message_by_message(tmp_path, monkeypatch) -> None:
     from neforward_ros.bag import write as bag_write
 
-    record(tmp_path / "in", seconds=3.0)
+    t = record(tmp_path / "in", seconds=3.0)
     process_bag(tmp_path / "in", tmp_path / "fast", BagOptions())
     monkeypatch.setattr(bag_write, "_FAST_MCAP", False)
     process_bag(tmp_path / "in", tmp_path / "slow", BagOptions())
@@ -236,8 +270,9 @@ def test_batched_mcap_writing_equals_rosbags_message_by_message(tmp_path, monkey
     assert fast.keys() == slow.keys() and all(fast[topic] == slow[topic] for topic in fast)
     with Reader(tmp_path / "fast") as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
-        assert counts == {"/neforward/link_states": 1500, "/neforward/com_states": 1500}
-        assert reader.duration > 2.9e9
+        count = int(covered(t).sum())
+        assert counts == {"/neforward/link_states": count, "/neforward/com_states": count}
+        assert reader.duration > 2.7e9
         # read back through the chunk indexes too (what players use), not only in file order
         window = list(reader.messages(start=reader.start_time + 10**9, stop=reader.start_time + 2 * 10**9))
     assert 990 <= len(window) <= 1010  # about 1 s of both topics at 500 Hz

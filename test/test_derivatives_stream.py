@@ -14,21 +14,10 @@ from neforward_ros import InputError
 from neforward_ros.estimation.batch import estimate_derivatives
 from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator, StreamSettings
 
-from conftest import jittered_stamps, reference, relative_rms
+from conftest import LogRecorder, jittered_stamps, reference, relative_rms
 
 EPOCH_NS = 1_700_000_000 * 10**9
 NAMES = ("a", "b")
-
-
-class LogRecorder:
-    def __init__(self) -> None:
-        self.lines: list[tuple[int, str]] = []
-
-    def __call__(self, level: int, message: str) -> None:
-        self.lines.append((level, message))
-
-    def count(self, text: str) -> int:
-        return sum(text in message for _, message in self.lines)
 
 
 def signal(t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -78,14 +67,19 @@ def test_fixed_lag_equals_the_whole_recording_estimator_on_interior_samples() ->
     assert np.array_equal(stamps, ns[: len(stamps)])
     tolerance = int(np.diff(ns[-9:]).min()) // 2
     assert ns[-1] - stamps[-1] >= 100_000_000 - tolerance > ns[-1] - ns[len(stamps)]
+    # An estimate exactly where the centred window (0.1 s either side) has samples from its start on:
+    # none from a half-empty window at the start.
+    ready = np.array([e.all_ready for e in out])
+    np.testing.assert_array_equal(ready, stamps - 100_000_000 >= ns[0])
     qd_batch, qdd_batch = estimate_derivatives(ns, noisy)
-    interior = slice(60, len(stamps))
+    interior = slice(int(np.argmax(ready)), len(stamps))
     np.testing.assert_allclose(qdd[interior], qdd_batch[interior], rtol=0, atol=1e-9 * np.abs(qdd_batch).max())
     np.testing.assert_allclose(qd[interior], qd_batch[interior], rtol=0, atol=1e-9 * np.abs(qd_batch).max())
-    np.testing.assert_array_equal(positions, noisy[: len(stamps)])  # the sample itself, not a fit
-    # flush() gives the last lag's worth from one-sided windows, so nothing is lost at the end.
+    np.testing.assert_array_equal(positions[ready], noisy[: len(stamps)][ready])  # the sample itself, not a fit
+    # flush() gives the last lag's stamps too, without estimates: their windows have no samples after them.
     rest = estimator.flush()
     assert [e.stamp_ns for e in rest] == list(ns[len(stamps) :])
+    assert not any(e.ready.any() for e in rest)
 
 
 def test_difference_method_streams_equal_to_its_batch_form() -> None:
@@ -93,10 +87,13 @@ def test_difference_method_streams_equal_to_its_batch_form() -> None:
     ns = to_ns(t)
     q, _, _ = signal(t)
     estimator = StreamingEstimator(NAMES, settings=StreamSettings(method="difference", mode="fixed_lag"))
-    stamps, _, qd, qdd = stacked(feed(estimator, ns, q))
+    out = feed(estimator, ns, q)
+    stamps, _, qd, qdd = stacked(out)
+    ready = np.array([e.all_ready for e in out])
+    assert ready[60:].all() and not ready[:40].any()  # from window / 2 = 0.1 s of history on
     qd_batch, qdd_batch = estimate_derivatives(ns, q, method="difference")
-    np.testing.assert_allclose(qdd[2:], qdd_batch[2 : len(stamps)], rtol=1e-9, atol=1e-9)
-    np.testing.assert_allclose(qd[2:], qd_batch[2 : len(stamps)], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(qdd[ready], qdd_batch[: len(stamps)][ready], rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(qd[ready], qd_batch[: len(stamps)][ready], rtol=1e-9, atol=1e-9)
 
 
 @pytest.mark.parametrize("noise", [0.0, 1e-4])
@@ -152,7 +149,8 @@ def test_continuous_joint_is_unwrapped_across_pi() -> None:
     estimator = StreamingEstimator(["c"], wrap=[True], settings=StreamSettings(mode="fixed_lag"))
     stamps, _, qd, qdd = stacked(feed(estimator, to_ns(t), wrapped[:, None], names=["c"]))
     index = np.searchsorted(to_ns(t), stamps)
-    assert np.max(np.abs(qd[:, 0] - (6.0 + 1.2 * np.cos(4.0 * t[index])))) <= 1e-3
+    assert np.isfinite(qd[50:]).all()
+    assert np.nanmax(np.abs(qd[:, 0] - (6.0 + 1.2 * np.cos(4.0 * t[index])))) <= 1e-3
     assert np.max(np.abs(qdd[60:, 0] + 4.8 * np.sin(4.0 * t[index][60:]))) <= 1e-2
 
 
@@ -221,7 +219,7 @@ def test_a_gap_longer_than_max_gap_restarts_the_history() -> None:
     assert log.count("history restarted") == 1  # throttled: both joints, one line
     after = [e for e in out if e.stamp_ns >= ns[500]]
     assert not after[0].all_ready  # one sample: no estimate yet
-    stamps, positions, _, qdd = stacked(after[100:])
+    stamps, positions, _, qdd = stacked(after[110:])  # the causal fit's 0.2 s window is full
     _, _, qdd_true = truth_at(stamps, t, ns)
     assert relative_rms(qdd, qdd_true) <= 0.1
     np.testing.assert_array_equal(positions, q[np.searchsorted(ns, stamps)])
@@ -300,7 +298,7 @@ def test_zero_stamps_use_the_receive_time_and_say_so_once() -> None:
 def test_joints_never_heard_are_not_ready_and_nan() -> None:
     estimator = StreamingEstimator(NAMES, settings=StreamSettings(mode="causal"))
     out = []
-    for k in range(10):
+    for k in range(150):  # 0.3 s: more than the 0.2 s window the causal fit needs
         out += estimator.update(EPOCH_NS + k * 2_000_000, ["a"], [0.01 * k * k])
     last = out[-1]
     assert last.ready.tolist() == [True, False]
@@ -335,7 +333,7 @@ messages = st.lists(
 
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(messages, st.sampled_from(["causal", "fixed_lag"]), st.sampled_from(["polyfit", "difference"]))
+@given(messages, st.sampled_from(["causal", "fixed_lag"]), st.sampled_from(["polyfit", "kalman", "difference"]))
 def test_random_message_sequences_never_raise_never_emit_nan_for_ready_joints(sequence, mode, method) -> None:
     estimator = StreamingEstimator(
         ["a", "b", "c"], wrap=[False, True, False], settings=StreamSettings(mode=mode, method=method, lag=0.004)
@@ -352,12 +350,13 @@ def test_random_message_sequences_never_raise_never_emit_nan_for_ready_joints(se
     # Then, after more than max_gap, clean input: a constant acceleration of 2 on every joint.
     restart = max([stamp, *(e.stamp_ns for e in out)]) + 600_000_000
     clean = []
-    for k in range(12):
+    for k in range(150):  # 0.3 s: the supports (0.2 s) are covered from 0.2 s on
         tk = k * 0.002
         clean += estimator.update(restart + k * 2_000_000, ["a", "b", "c"], [tk * tk, 0.1 + tk * tk, tk * tk])
     clean += estimator.flush()
-    assert clean and clean[-1].all_ready
-    np.testing.assert_allclose(clean[-1].accelerations, 2.0, rtol=1e-6)
+    ready = [e for e in clean if e.all_ready]
+    assert len(ready) >= 40
+    np.testing.assert_allclose(ready[-1].accelerations, 2.0, rtol=1e-6 if method != "kalman" else 1e-3)
     out += clean
     for estimate in out:
         finite = (

@@ -137,7 +137,7 @@ def test_imu_at_rest_reads_gravity_upward_and_zero_gravity_reads_nothing() -> No
         )
         n = len(pipeline.model.joint_names)
         out = []
-        for k in range(12):  # a robot standing still, positions only
+        for k in range(120):  # a robot standing still, positions only, for more than the 0.2 s window
             out += pipeline.on_joint_state(STAMP + k * 2_000_000, list(pipeline.model.joint_names), [0.3] * n)
         imu = dict(pipeline.messages(out[-1]))["~/panda_link0/imu"]
         assert imu["linear_acceleration"] == pytest.approx({"x": 0.0, "y": 0.0, "z": expected}, abs=1e-9)
@@ -224,9 +224,11 @@ def test_link_names_that_cannot_be_topic_names_are_rejected_up_front() -> None:
 
 
 @pytest.mark.parametrize("robot", ["panda", "tree", "mimic", "humanoid"])
-def test_published_bytes_are_the_encoded_contents(robot: str) -> None:
-    """The node publishes link_states and com_states patched into per-model templates: the bytes must
-    be those of the message contents (checked against Pinocchio above) encoded message by message."""
+@pytest.mark.parametrize("partial", [False, True])
+def test_published_bytes_are_the_encoded_contents(robot: str, partial: bool) -> None:
+    """The node publishes link_states and com_states patched into templates: the bytes must be those
+    of the message contents (checked against Pinocchio above) encoded message by message, for the
+    whole robot and for the links determined when a joint is never heard."""
     from neforward_ros.wire import cdr
 
     path = TEST_ROBOTS[robot]
@@ -245,12 +247,15 @@ def test_published_bytes_are_the_encoded_contents(robot: str) -> None:
         )
     )
     names = list(pipeline.model.joint_names)
+    if partial:
+        names = names[:-1]
     rng = np.random.default_rng(3)
     results = []
-    for k in range(20):
+    for k in range(120):
         results += pipeline.on_joint_state(STAMP + k * 2_000_000, names, rng.uniform(-1, 1, len(names)).tolist())
     types = {output.topic: output.type for output in pipeline.outputs()}
     assert len(results) > 10
+    assert all((len(r.link_names) < len(links)) == partial for r in results)
     for result in results:
         published = pipeline.encode(result)
         expected = [(topic, cdr.encode(types[topic], contents)) for topic, contents in pipeline.messages(result)]

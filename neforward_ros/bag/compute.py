@@ -13,7 +13,10 @@ from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.read import Recording
 from neforward_ros.bag.report import Segment
 from neforward_ros.estimation.batch import estimate_at
+from neforward_ros.estimation.coverage import covered_mask
+from neforward_ros.estimation.stream import StreamSettings
 from neforward_ros.model import RobotModel
+from neforward_ros.node.policy import apply_policy, hold_vector
 from neforward_ros.node.result import Result, make_result
 from neforward_ros.recursion import kinematics_table, root_state
 from neforward_ros.stamps import NS
@@ -28,7 +31,8 @@ class States:
 
     Attributes:
         stamps: (T,) the samples' stamps, integer ns; log_times: (T,) their recording times.
-        q, qd, qdd: (T, n) in the model's joint order.
+        q, qd, qdd: (T, n) in the model's joint order; zeros where a joint has nothing.
+        known: (T, n) whether each joint's state is an estimate (or held, under ``hold``).
     """
 
     stamps: np.ndarray
@@ -36,6 +40,7 @@ class States:
     q: np.ndarray
     qd: np.ndarray
     qdd: np.ndarray
+    known: np.ndarray
 
     def __len__(self) -> int:
         return len(self.stamps)
@@ -50,7 +55,8 @@ def results(
     for start in range(0, len(states), chunk):
         part = slice(start, start + chunk)
         table = kinematics_table(model, states.q[part], states.qd[part], states.qdd[part], root)
-        yield make_result(model, states.stamps[part], table), states.log_times[part]
+        determined = model.determined_links(states.known[part])
+        yield make_result(model, states.stamps[part], table, determined), states.log_times[part]
 
 
 def _segments(recording: Recording) -> list[tuple[int, int]]:
@@ -66,10 +72,19 @@ def _segments(recording: Recording) -> list[tuple[int, int]]:
 
 
 def estimate_states(recording: Recording, options: BagOptions, progress: Callable[[str, float], None]) -> States:
-    """Each segment's joint states at every message stamp, from the whole-recording estimator."""
+    """Each segment's joint states at every message stamp, from the whole-recording estimator.
+
+    As in the node, a joint has an estimate at a stamp only where its samples cover the estimator's
+    support there (:mod:`neforward_ros.estimation.coverage`, the fixed-lag fit's) and none is more
+    than max_gap away; the publish policy (:mod:`neforward_ros.node.policy`) then says what is
+    written for stamps where some joints have none.
+    """
     model = recording.model
     wrap = model.continuous_columns
-    pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+    support = StreamSettings(method=options.method, window=options.window, order=options.order).support
+    hold = hold_vector(model.joint_names, options.hold_positions)
+    n = len(model.joint_names)
+    pieces: list[tuple[np.ndarray, ...]] = []
     ranges = _segments(recording)
     for number, (start, stop) in enumerate(ranges):
         progress("estimating", number / len(ranges))
@@ -79,24 +94,30 @@ def estimate_states(recording: Recording, options: BagOptions, progress: Callabl
         targets, first = np.unique(segment_stamps, return_index=True)
         origin = int(targets[0])
         target_s = (targets - origin) / NS
-        state = np.full((3, len(targets), len(model.joint_names)), np.nan)
+        state = np.full((3, len(targets), n), np.nan)
+        # As the node, which emits an estimate once a message about `after` later arrives (half an
+        # interval early, for jitter) and has none for the last stretch of a stream.
+        early = 0.5 * float(np.median(np.diff(target_s))) if len(target_s) > 1 else 0.0
+        reached = target_s + support.after <= target_s[-1] + early
+        silent = np.ones((len(targets), n), dtype=bool)
         # Each joint's own samples; joints with the same sample times and kind are estimated together.
         groups: dict[tuple[bytes, bool], list[tuple[int, np.ndarray, np.ndarray]]] = {}
+        absent = []
         for j, (rows, qs, vs) in recording.columns.items():
             inside = (rows >= start) & (rows < stop) & np.isfinite(qs)
             t_ns, keep = np.unique(recording.stamps[rows[inside]], return_index=True)
-            if len(t_ns) < 3:
-                segment.note = f"fewer than 3 samples of {model.joint_names[j]}"
-                break
+            if len(t_ns) < support.min_samples:
+                absent.append(model.joint_names[j])
+                continue
             q = qs[inside][keep]
             if wrap[j]:
                 q = np.unwrap(q)
             v = vs[inside][keep]
             use_velocity = options.velocity_source != "differentiate" and bool(np.all(np.isfinite(v)))
             groups.setdefault((t_ns.tobytes(), use_velocity), []).append((j, q, v))
-        if segment.note:
-            segment.skipped = len(targets)
-            continue
+        absent += [model.joint_names[j] for j in range(n) if j not in recording.columns]
+        if absent:
+            segment.note = f"too few samples of {', '.join(sorted(set(absent)))} for an estimate"
         for (t_bytes, use_velocity), members in groups.items():
             t = (np.frombuffer(t_bytes, dtype=np.int64) - origin) / NS
             joints = [j for j, _, _ in members]
@@ -110,20 +131,45 @@ def estimate_states(recording: Recording, options: BagOptions, progress: Callabl
                 order=options.order,
             )
             stale = _gap_to_samples(t, target_s) > options.max_gap
+            silent[:, joints] = stale[:, None]
+            unready = stale | ~covered_mask(t, target_s, support, _end_slack(t)) | ~reached
             for column, values in enumerate((q_at, qd_at, qdd_at)):
-                values[stale] = np.nan
+                values[unready] = np.nan
                 state[column][:, joints] = values
-        ok = np.all(np.isfinite(state), axis=(0, 2))
+        known = np.all(np.isfinite(state), axis=0)
+        published = apply_policy(options.publish_policy, *state, known, silent, hold)
+        ok = published.publish
         segment.skipped = int(np.count_nonzero(~ok))
         segment.samples_out = int(np.count_nonzero(ok))
+        segment.partial = int(np.count_nonzero(ok & ~published.known.all(axis=1)))
         log_times = recording.log_times[start:stop][first]
-        pieces.append((targets[ok], log_times[ok], state[0][ok], state[1][ok], state[2][ok]))
+        pieces.append(
+            (
+                targets[ok],
+                log_times[ok],
+                published.q[ok],
+                published.qd[ok],
+                published.qdd[ok],
+                published.known[ok],
+            )
+        )
     progress("estimating", 1.0)
     if not pieces:
         stamps = np.zeros(0, dtype=np.int64)
-        zeros = np.zeros((0, len(model.joint_names)))
-        pieces = [(stamps, stamps, zeros, zeros, zeros)]
+        zeros = np.zeros((0, n))
+        pieces = [(stamps, stamps, zeros, zeros, zeros, zeros.astype(bool))]
     return States(*(np.concatenate(parts) for parts in zip(*pieces, strict=True)))
+
+
+def _end_slack(t: np.ndarray) -> float:
+    """How far, s, an estimate's support may reach past the joint's last sample: as in the node, one and
+    a half of its longest sample interval among 8 (the node takes the last 8; here the median over the
+    recording of the longest of every 8, so that one late sample does not widen it everywhere)."""
+    intervals = np.diff(t)
+    if len(intervals) < 8:
+        return float("inf")
+    longest = np.lib.stride_tricks.sliding_window_view(intervals, 8).max(axis=1)
+    return 1.5 * float(np.median(longest))
 
 
 def _gap_to_samples(t: np.ndarray, targets: np.ndarray) -> np.ndarray:

@@ -25,6 +25,7 @@ class CsvWriter:
     The header names each column's link, quantity, frame, component and unit, e.g.
     ``panda_hand.accel_in_root.z[m/s^2]``: vectors along the root frame's axes. accel and com_accel
     are specific forces (a - g), as in the node's messages. ``t[s]`` counts from the first sample.
+    A link that a joint without an estimate moves has empty cells (NaN) at that sample.
     """
 
     def __init__(self, path: Path, model: RobotModel) -> None:
@@ -47,6 +48,12 @@ class CsvWriter:
             for link_index in range(len(self.model.link_names))
             for quantity, _, _ in CSV_FIELDS
         ]
+        if result.determined is not None:  # links not determined at a sample: NaN
+            blocks = [
+                np.where(result.determined[:, link_index, None], block, np.nan)
+                for link_index in range(len(self.model.link_names))
+                for block in blocks[link_index * len(CSV_FIELDS) : (link_index + 1) * len(CSV_FIELDS)]
+            ]
         values = np.concatenate([((stamps - self.origin) / NS)[:, None], *blocks], axis=1)
         text = np.char.mod("%.9g", values)
         self.stream.writelines(
@@ -70,8 +77,12 @@ class PlotSeries:
     def add(self, result: Result) -> None:
         root = result.in_root
         self.stamps.append(np.asarray(result.stamp_ns, dtype=np.int64))
-        self.accel.append(np.linalg.norm(root.accel + self.gravity, axis=-1))
-        self.alpha.append(np.linalg.norm(root.alpha, axis=-1))
+        accel = np.linalg.norm(root.accel + self.gravity, axis=-1)
+        alpha = np.linalg.norm(root.alpha, axis=-1)
+        if result.determined is not None:  # links not determined at a sample: gaps in the lines
+            accel, alpha = (np.where(result.determined, x, np.nan) for x in (accel, alpha))
+        self.accel.append(accel)
+        self.alpha.append(alpha)
 
 
 def write_plot(path: Path, series: PlotSeries, model: RobotModel) -> None:
@@ -91,19 +102,24 @@ def write_plot(path: Path, series: PlotSeries, model: RobotModel) -> None:
             if not np.any(values[:, k] > 0):
                 continue
             line = axis.plot(t, values[:, k], linewidth=0.8, label=link)[0]
-            peak = int(np.argmax(values[:, k]))
+            peak = int(np.nanargmax(values[:, k]))
             axis.plot(t[peak], values[peak, k], "o", color=line.get_color(), markersize=4)
         # Label the three highest distinct peaks; links moving as one (rigidly attached) share one label.
         labelled: list[tuple[float, float]] = []
-        for k in np.argsort(values.max(axis=0))[::-1]:
-            peak = int(np.argmax(values[:, k]))
+        peaks = np.nanmax(np.where(np.isnan(values), -np.inf, values), axis=0)
+        for k in np.argsort(peaks)[::-1]:
+            if not np.any(values[:, k] > 0):
+                break
+            peak = int(np.nanargmax(values[:, k]))
             value = float(values[peak, k])
             if value <= 0 or len(labelled) == 3:
                 break
             if any(abs(value - v) <= 1e-9 * max(1.0, v) and t[peak] == at for v, at in labelled):
                 continue
             same = sum(
-                1 for other in range(values.shape[1]) if other != k and np.allclose(values[:, other], values[:, k])
+                1
+                for other in range(values.shape[1])
+                if other != k and np.allclose(values[:, other], values[:, k], equal_nan=True)
             )
             extra = f" (and {same} more links)" if same else ""
             axis.annotate(

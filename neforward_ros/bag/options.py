@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 from neforward_ros.errors import InputError
 from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW
 from neforward_ros.estimation.stream import DEFAULT_MAX_GAP, VELOCITY_SOURCES
+from neforward_ros.node.policy import PUBLISH_POLICIES
 from neforward_ros.recursion import DEFAULT_GRAVITY
 
 STORAGES = ("mcap", "sqlite3")
@@ -24,8 +26,12 @@ class BagOptions:
         gravity: m/s^2 in the root frame.
         method, window, order: the whole-recording estimator's.
         velocity_source: ``auto`` uses recorded velocities where every sample of a joint has one.
-        max_gap: s; stamps further than this from a joint's samples get no output.
+        max_gap: s; stamps further than this from a joint's samples get no output for it.
         frame_prefix: prepended to frame_ids.
+        publish_policy: when some joints have no estimate at a stamp: ``partial`` writes the links
+            every joint above which has one, ``wait`` writes nothing, ``hold`` holds joints with no
+            sample within max_gap (or none at all) at ``hold_positions`` (others 0), at rest.
+        hold_positions: joint name -> position, for ``hold``.
     """
 
     urdf: str | None = None
@@ -40,6 +46,8 @@ class BagOptions:
     velocity_source: str = "auto"
     max_gap: float = DEFAULT_MAX_GAP
     frame_prefix: str = ""
+    publish_policy: str = "partial"
+    hold_positions: Mapping[str, float] = field(default_factory=dict)
 
 
 def check_options(options: BagOptions) -> None:
@@ -47,3 +55,10 @@ def check_options(options: BagOptions) -> None:
         raise InputError(f"unknown storage {options.storage!r}; choose {' or '.join(STORAGES)}")
     if options.velocity_source not in VELOCITY_SOURCES:
         raise InputError(f"unknown velocity_source {options.velocity_source!r}")
+    if options.publish_policy not in PUBLISH_POLICIES:
+        raise InputError(f"unknown publish policy {options.publish_policy!r}; choose {', '.join(PUBLISH_POLICIES)}")
+    if options.method not in ("polyfit", "difference"):
+        raise InputError(
+            f"the bag tool's estimator is polyfit or difference (whole-recording fits), not {options.method!r}: "
+            "a recording has every sample at hand, so the low-delay estimators have nothing to offer there"
+        )

@@ -54,11 +54,17 @@ def process_bag(
     for link in (*options.accel_links, *options.imu_links):
         if link not in model.link_index:
             raise InputError(f"link {link!r} is not in robot {model.name!r}")
+    unknown = [name for name in options.hold_positions if name not in model.joint_index]
+    if unknown:
+        raise InputError(f"--hold names joints that robot {model.name!r} does not have: {', '.join(unknown)}")
     states = estimate_states(recording, options, progress)
     report = recording.report
     report.samples_out = len(states)
     if report.samples_out == 0:
-        raise InputError("no output: no stretch of the recording has enough samples of every joint")
+        raise InputError(
+            "no output: no stamp of the recording has an estimate for every joint (publish policy wait) or for "
+            f"any joint; an estimate needs samples covering {options.window:g} s around its stamp"
+        )
     # Every output is written under a temporary name and all are moved into place together at the
     # end: an error or an interrupt leaves none of them, and nothing half-written.
     partials: list[Path] = []

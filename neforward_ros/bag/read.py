@@ -70,8 +70,12 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
     columns, unknown = _columns(model, decoded, renumber)
     report.ignored_names = sorted(unknown)
     missing = [model.joint_names[j] for j in range(len(model.joint_names)) if j not in columns]
-    if missing:
-        raise InputError(f"joints of robot {model.name!r} missing from {topic}: {', '.join(missing)}")
+    if missing and options.publish_policy == "wait":
+        raise InputError(
+            f"joints of robot {model.name!r} missing from {topic}: {', '.join(missing)} (publish policy wait: "
+            "nothing could be written; partial writes the links they do not move, hold holds them)"
+        )
+    report.missing_joints = missing
     return Recording(model, report, stamps, times, columns)
 
 

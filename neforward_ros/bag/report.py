@@ -18,6 +18,7 @@ class Segment:
     messages: int
     samples_out: int = 0
     skipped: int = 0
+    partial: int = 0
     note: str = ""
 
 
@@ -31,6 +32,7 @@ class BagReport:
     segments: list[Segment] = field(default_factory=list)
     zero_stamps: int = 0
     ignored_names: list[str] = field(default_factory=list)
+    missing_joints: list[str] = field(default_factory=list)
     topics: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
@@ -68,14 +70,16 @@ def describe(report: BagReport) -> str:
         )
     for number, segment in enumerate(report.segments, 1):
         span = (segment.last_ns - segment.first_ns) / NS
-        note = (
-            f"; skipped: {segment.note}"
-            if segment.note
-            else (f"; {segment.skipped} stamps without output" if segment.skipped else "")
-        )
+        note = f"; {segment.skipped} stamps without output" if segment.skipped else ""
+        if segment.partial:
+            note += f"; {segment.partial} with only some links (joints without an estimate)"
+        if segment.note:
+            note += f"; {segment.note}"
         lines.append(f"  segment {number}: {segment.messages} messages over {span:.3f} s{note}")
     if report.zero_stamps:
         lines.append(f"{report.zero_stamps} messages had a zero header.stamp: their recording time was used")
+    if report.missing_joints:
+        lines.append(f"joints of the model never in the recording: {', '.join(report.missing_joints)}")
     if report.ignored_names:
         lines.append(f"ignored joint names not in the model: {', '.join(report.ignored_names)}")
     return "\n".join(lines)

@@ -11,7 +11,7 @@ import numpy as np
 
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.model import RobotModel
-from neforward_ros.node import messages, topics
+from neforward_ros.node import messages
 from neforward_ros.node.messages import per_link_messages
 from neforward_ros.node.names import NodeNames
 from neforward_ros.node.result import Result
@@ -56,26 +56,23 @@ class RecordingWriter:
             for topic, kind in output_topics(options)
         }
         self.topics = [topic for topic, _ in output_topics(options)]
-        self._templates: dict[str, cdr.MultiDofTemplate] = {}
+        self._templates = messages.Templates(options.frame_prefix)
+        self._multi_dof = [self.connections[self.names.resolve(topic)] for topic in (LINK_STATES, COM_STATES)]
 
     def write(self, result: Result, log_times: np.ndarray) -> None:
-        """One chunk of results, each recorded at its joint state's recording time."""
+        """One chunk of results, each recorded at its joint state's recording time; samples where only
+        some links are determined carry those links only (runs of samples alike are written together)."""
+        for part, run in result.runs():
+            self._write_run(run, log_times[part])
+
+    def _write_run(self, result: Result, log_times: np.ndarray) -> None:
         options, names = self.options, self.names
         prefix = options.frame_prefix
-        if not self._templates:
-            first = result.sample(0)
-            self._templates = {
-                names.resolve(LINK_STATES): cdr.MultiDofTemplate(
-                    cdr.encode(topics.LINK_STATES_TYPE, messages.link_states(first, prefix))
-                ),
-                names.resolve(COM_STATES): cdr.MultiDofTemplate(
-                    cdr.encode(topics.LINK_STATES_TYPE, messages.com_states(first, prefix))
-                ),
-            }
-        link_blocks, com_blocks = result.blocks
         streams = [
-            (self.connections[topic], self._templates[topic].encode_many(result.stamp_ns, *blocks))
-            for topic, blocks in zip(self._templates, (link_blocks, com_blocks), strict=True)
+            (connection, template.encode_many(result.stamp_ns, *blocks))
+            for connection, template, blocks in zip(
+                self._multi_dof, self._templates(result), result.blocks, strict=True
+            )
         ]
         per_link = bool(options.accel_links or options.imu_links)
         if not per_link and _FAST_MCAP and _write_rows_mcap(self.writer, streams, log_times):

@@ -1,10 +1,11 @@
 """``neforward demo``: the node live on loopback, fed by a synthetic joint-state publisher.
 
-Starts ``neforward run`` as a separate process on the bundled robot (causal mode, so that the
-latency shown is the processing latency), publishes JointState (positions only, a smooth
-trajectory, 500 Hz, stamped with the wall clock at writing) and shows every link's |a|, |alpha| and
-centre-of-mass |a| as they arrive, refreshed in place. After the given time it prints a summary:
-messages in and out, latency p50/p99 (output received minus input stamp) and the peaks per link.
+Starts ``neforward run`` as a separate process on the bundled robot with the node's default
+estimator (or the one asked for), publishes JointState (positions only, a smooth trajectory, 500 Hz,
+stamped with the wall clock at writing) and shows every link's |a|, |alpha| and centre-of-mass |a|
+as they arrive, refreshed in place. After the given time it prints a summary: the estimator and its
+delay, messages in and out, latency p50/p99, and the peaks per link next to their exact values
+(:func:`neforward_ros.forward_recursion` at the true joint states of the same stamps).
 """
 
 from __future__ import annotations
@@ -21,9 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
+from neforward_ros.demo.robot import demo_trajectory
 from neforward_ros.errors import NeforwardError
+from neforward_ros.estimation.stream import StreamSettings
 from neforward_ros.model import RobotModel, load_model
 from neforward_ros.node import topics
+from neforward_ros.recursion import forward_recursion
 from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr
 
@@ -40,14 +44,14 @@ class _Publisher(threading.Thread):
         self.rate = rate
         self.sent = 0
         self.stop = threading.Event()
+        self.first = time.time_ns()  # the trajectory's time 0, wall clock ns
 
     def run(self) -> None:
         from neforward_ros.dds.types import raw_sample
-        from neforward_ros.demo.robot import demo_trajectory
 
         names = list(self.model.joint_names)
         start = time.monotonic()
-        first = time.time_ns()
+        self.first = first = time.time_ns()
         for k in range(self.count):
             if self.stop.is_set():
                 return
@@ -78,7 +82,46 @@ def _matched(entity) -> bool:
     return entity.get_subscription_matched_status().current_count > 0
 
 
-def live_demo(seconds: float, urdf: str | None, rate: float = 500.0) -> int:
+def live_demo(seconds: float, urdf: str | None, rate: float = 500.0, estimator: StreamSettings | None = None) -> int:
+    """Run the demo and print its summary; returns the exit code."""
+    run = run_demo(seconds, urdf, rate, estimator, live=sys.stdout.isatty())
+    run.view.summary(run)
+    return 0
+
+
+class DemoRun:
+    """What a demo run measured: the view's peaks and latencies, and what the publisher sent.
+
+    Attributes:
+        view: peaks (node) and latencies.
+        sent: JointState messages published.
+        first_ns: the trajectory's time 0 (wall clock ns).
+        settings: the node's estimator settings.
+    """
+
+    def __init__(self, view: _View, sent: int, rate: float, first_ns: int, settings: StreamSettings) -> None:
+        self.view, self.sent, self.rate, self.first_ns, self.settings = view, sent, rate, first_ns, settings
+
+    def exact_peaks(self) -> dict[str, np.ndarray]:
+        """Per link, the peaks of |a| (kinematic), |alpha| and COM |a| at the true joint states of the
+        stamps the node answered, from the batched recursion."""
+        stamps = np.array(self.view.stamps, dtype=np.int64)
+        kin = forward_recursion(
+            self.view.model,
+            *demo_trajectory(self.view.model, (stamps - self.first_ns) / 1e9),
+            gravity=(0.0, 0.0, 0.0),
+        )
+        return {
+            "a": np.linalg.norm(kin.accel, axis=-1).max(axis=0),
+            "alpha": np.linalg.norm(kin.alpha, axis=-1).max(axis=0),
+            "com": np.linalg.norm(kin.com_accel, axis=-1).max(axis=0),
+        }
+
+
+def run_demo(
+    seconds: float, urdf: str | None, rate: float = 500.0, estimator: StreamSettings | None = None, live: bool = False
+) -> DemoRun:
+    """The node on loopback DDS, fed for ``seconds``; the outputs gathered (shown live if ``live``)."""
     from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
     from cyclonedds.domain import DomainParticipant
     from cyclonedds.pub import DataWriter
@@ -90,12 +133,15 @@ def live_demo(seconds: float, urdf: str | None, rate: float = 500.0) -> int:
     from neforward_ros.dds.types import RawBytes, dds_type, raw_reader
     from neforward_ros.resources import DEFAULT_ROBOT, bundled_config_path
 
+    settings = estimator if estimator is not None else StreamSettings()
     path = Path(urdf) if urdf else bundled_config_path(DEFAULT_ROBOT)
     model = load_model(path)
     domain = use_loopback()
     node_log = tempfile.NamedTemporaryFile(prefix="neforward-demo-node-", suffix=".log", delete=False)
     command = [sys.executable, "-m", "neforward_ros.cli", "run", "--urdf", str(path)]
-    command += ["--ros-args", "-p", "estimator.mode:=causal"]
+    command += ["--ros-args", "-p", f"estimator.method:={settings.method}", "-p", f"estimator.mode:={settings.mode}"]
+    if settings.lag is not None:
+        command += ["-p", f"estimator.lag:={float(settings.lag)!r}"]
     node = subprocess.Popen(command, env=os.environ.copy(), stdout=node_log, stderr=subprocess.STDOUT)
     participant = DomainParticipant(domain)
     joint_state = topics.JOINT_STATE_TYPE
@@ -111,7 +157,7 @@ def live_demo(seconds: float, urdf: str | None, rate: float = 500.0) -> int:
     for reader in readers.values():
         waitset.attach(ReadCondition(reader, SampleState.Any | ViewState.Any | InstanceState.Any))
     publisher = _Publisher(writer, model, seconds, rate)
-    view = _View(model, sys.stdout.isatty())
+    view = _View(model, live, settings, node_log.name)
     try:
         _wait_matched([writer, *readers.values()], time.monotonic() + STARTUP_TIMEOUT, node)
         time.sleep(0.3)  # let the node's side of the matching settle too
@@ -138,31 +184,38 @@ def live_demo(seconds: float, urdf: str | None, rate: float = 500.0) -> int:
             node.kill()
             node.wait()
         node_log.close()
-    view.summary(publisher.sent, rate, node_log.name)
+    view.node_log = Path(node_log.name).read_text()
     os.unlink(node_log.name)
-    return 0
+    return DemoRun(view, publisher.sent, rate, publisher.first, settings)
 
 
 class _View:
     """Peaks and latencies, and the table refreshed in place."""
 
-    def __init__(self, model: RobotModel, live: bool) -> None:
+    def __init__(self, model: RobotModel, live: bool, settings: StreamSettings, node_log: str) -> None:
+        self.model = model
         self.links = model.link_names
         n = len(self.links)
         self.live = live
+        self.settings = settings
+        self.node_log = node_log
         self.latest = {"a": np.zeros(n), "alpha": np.zeros(n), "com": np.zeros(n)}
         self.peak = {key: np.zeros(n) for key in self.latest}
         self.latencies: list[float] = []
+        self.stamps: list[int] = []
         self.received = {"link_states": 0, "com_states": 0}
         self.gravity = np.array([0.0, 0.0, -9.81])
         self._lines = 0
         self._last = 0.0
 
     def add(self, topic: str, point: cdr.MultiDofPoint, now_ns: int) -> None:
+        if point.joint_names != self.links:
+            return  # only some links (not with this demo's publisher, which sends every joint)
         self.received[topic] += 1
         kinematic = point.accelerations[:, :3] + self.gravity  # specific force back to acceleration
         if topic == "link_states":
             self.latencies.append((now_ns - point.stamp_ns) / 1e6)
+            self.stamps.append(point.stamp_ns)
             self._update("a", np.linalg.norm(kinematic, axis=1))
             self._update("alpha", np.linalg.norm(point.accelerations[:, 3:], axis=1))
         else:
@@ -172,8 +225,11 @@ class _View:
         self.latest[key] = values
         self.peak[key] = np.maximum(self.peak[key], values)
 
+    def _width(self) -> int:
+        return max(len(name) for name in self.links)
+
     def _table(self, source: dict[str, np.ndarray], title: str) -> list[str]:
-        width = max(len(name) for name in self.links)
+        width = self._width()
         lines = [title, f"{'link':<{width}}  {'|a| m/s^2':>10}  {'|alpha| rad/s^2':>15}  {'COM |a| m/s^2':>13}"]
         for k, name in enumerate(self.links):
             lines.append(
@@ -198,16 +254,47 @@ class _View:
         sys.stdout.flush()
         self._lines = len(lines)
 
-    def summary(self, sent: int, rate: float, node_log: str) -> None:
+    def summary(self, run: DemoRun) -> None:
         received = self.received["link_states"]
         if received == 0:
-            log = Path(node_log).read_text().strip().splitlines()
+            log = self.node_log.strip().splitlines()
             detail = ("; node said: " + log[-1]) if log else ""
             raise NeforwardError(f"no results arrived from the node{detail}")
+        lag_ms = self.settings.effective_lag * 1e3
         p50, p99 = np.percentile(self.latencies, [50, 99])
         print()
+        print(f"estimator: {self.settings.describe()}")
         com = self.received["com_states"]
-        print(f"joint states in: {sent} at {rate:g} Hz; link_states out: {received}; com_states out: {com}")
-        worst = max(self.latencies)
-        print(f"latency (input stamp -> link_states received): p50 {p50:.2f} ms, p99 {p99:.2f} ms, max {worst:.2f} ms")
-        print("\n".join(self._table(self.peak, "peaks over the run")))
+        print(f"joint states in: {run.sent} at {run.rate:g} Hz; link_states out: {received}; com_states out: {com}")
+        print(
+            f"latency (link_states received - the stamp it refers to): p50 {p50:.2f} ms, p99 {p99:.2f} ms, "
+            f"max {max(self.latencies):.2f} ms" + (f"; the estimator's lag is {lag_ms:g} ms of that" if lag_ms else "")
+        )
+        exact = run.exact_peaks()
+        width = self._width()
+        print("peaks over the run: the node's, and exact (forward_recursion at the true joint states)")
+        print(f"{'link':<{width}}  {'|a| m/s^2':>19}  {'|alpha| rad/s^2':>19}  {'COM |a| m/s^2':>19}")
+        print(f"{'':<{width}}  " + "  ".join([f"{'node':>9} {'exact':>9}"] * 3))
+        for k, name in enumerate(self.links):
+            cells = [f"{self.peak[key][k]:>9.3f} {exact[key][k]:>9.3f}" for key in ("a", "alpha", "com")]
+            print(f"{name:<{width}}  " + "  ".join(cells))
+        worst, where = peak_difference(self.peak, exact, self.links)
+        print(f"largest difference of a peak from its exact value: {100 * worst:.2f} % ({where})")
+
+
+QUANTITIES = {"a": "|a|", "alpha": "|alpha|", "com": "COM |a|"}
+
+
+def peak_difference(
+    peaks: dict[str, np.ndarray], exact: dict[str, np.ndarray], links: tuple[str, ...]
+) -> tuple[float, str]:
+    """The largest relative difference of a peak from its exact value, and where; peaks below 1e-3 of
+    the largest of their quantity (links that barely move) are compared to that instead."""
+    worst, where = 0.0, ""
+    for key, label in QUANTITIES.items():
+        scale = np.maximum(exact[key], 1e-3 * exact[key].max())
+        relative = np.abs(peaks[key] - exact[key]) / np.where(scale > 0, scale, 1.0)
+        k = int(np.argmax(relative))
+        if relative[k] > worst:
+            worst, where = float(relative[k]), f"{label} of {links[k]}"
+    return worst, where

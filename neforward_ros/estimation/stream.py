@@ -1,9 +1,12 @@
 """Joint velocities and accelerations from joint-state messages, one message at a time.
 
 :class:`StreamingEstimator` keeps each joint's recent samples and, for every message, returns the
-estimates that message completes: in ``causal`` mode at the newest sample (a one-sided fit), in
-``fixed_lag`` mode ``lag`` seconds back (a centred fit, equal to the whole-recording estimate).
-Bad input never raises; it is dropped and logged (throttled).
+estimates that message completes: in ``causal`` mode at the newest sample, in ``fixed_lag`` mode
+``lag`` seconds back. Two estimators: ``polyfit``, a local polynomial fit (centred in fixed-lag mode
+with the default lag, then equal to the whole-recording estimate; one-sided in causal mode), and
+``kalman``, a Kalman filter (causal) or fixed-lag smoother on a Gaussian-process motion model
+(:mod:`.motion`), accurate at low latency. An estimate is given only where the samples cover what
+the estimator needs (:mod:`.coverage`). Bad input never raises; it is dropped and logged (throttled).
 """
 
 from __future__ import annotations
@@ -12,25 +15,28 @@ import logging
 import math
 from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from neforward_ros.errors import InputError
-from neforward_ros.estimation.fit import (
-    DEFAULT_ORDER,
-    DEFAULT_WINDOW,
-    check_settings,
-    fit_at,
-    local_difference,
-)
+from neforward_ros.estimation import fit
+from neforward_ros.estimation.coverage import Support, uncovered
+from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW, fit_window, local_difference
+from neforward_ros.estimation.kalman import KalmanTrack
+from neforward_ros.estimation.motion import KalmanSettings, MotionModel
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.stamps import NS
 
+METHODS = ("polyfit", "kalman", "difference")
 MODES = ("causal", "fixed_lag")
 VELOCITY_SOURCES = ("auto", "message", "differentiate")
 DEFAULT_MAX_GAP = 0.5
 """Seconds without a sample after which a joint's history restarts."""
+DEFAULT_KALMAN_LAG = 0.02
+"""The Kalman smoother's default lag, s."""
+KALMAN_MIN_SAMPLES = 10
+"""Samples a Kalman estimate's support must hold at least (as a degree-4 fit's)."""
 
 
 @dataclass(frozen=True)
@@ -38,19 +44,23 @@ class StreamSettings:
     """Options of :class:`StreamingEstimator`.
 
     Attributes:
-        method: ``"polyfit"`` or ``"difference"``, as for :func:`estimate_derivatives`.
-        window: full width of the local fit, s.
+        method: ``"polyfit"`` (local polynomial fit), ``"kalman"`` (Kalman filter or fixed-lag smoother
+            on the motion model of ``kalman``) or ``"difference"`` (numpy.gradient twice; a baseline).
+        window: polyfit: full width of the local fit, s. kalman: the stretch of recent samples an
+            estimate needs before its stamp (its warm-up), s.
         order: polynomial degree (polyfit).
-        mode: ``"causal"``: each estimate refers to the newest sample, fitted on the ``window``
-            seconds before it (lowest latency). ``"fixed_lag"``: each estimate refers to the sample
-            ``lag`` seconds before the newest and is stamped with that sample's stamp; with the
-            default lag of window / 2 the fit is centred, as in the whole-recording estimator.
-        lag: fixed-lag delay, s, between 0 and window; None means window / 2.
+        mode: ``"causal"``: each estimate refers to the newest sample (lowest latency).
+            ``"fixed_lag"``: each estimate refers to the sample ``lag`` seconds before the newest and
+            is stamped with that sample's stamp.
+        lag: fixed-lag delay, s, between 0 and window; None means the method's default: window / 2
+            for polyfit and difference (a centred fit, as in the whole-recording estimator),
+            :data:`DEFAULT_KALMAN_LAG` for kalman.
         max_gap: a joint whose samples are further apart than this, s, restarts its history.
         velocity_source: ``"auto"`` uses the message's velocities where they are present and
             differentiates positions elsewhere; ``"message"`` expects them (and warns once per
             joint that lacks them); ``"differentiate"`` ignores them. Accelerations are the
             derivative of whichever velocity is used.
+        kalman: the Kalman estimator's noise levels and motion model.
     """
 
     method: str = "polyfit"
@@ -60,9 +70,12 @@ class StreamSettings:
     lag: float | None = None
     max_gap: float = DEFAULT_MAX_GAP
     velocity_source: str = "auto"
+    kalman: KalmanSettings = field(default_factory=KalmanSettings)
 
     def __post_init__(self) -> None:
-        check_settings(self.method, self.window, self.order)
+        if self.method not in METHODS:
+            raise InputError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
+        fit.check_settings("polyfit", self.window, self.order)
         if self.mode not in MODES:
             raise InputError(f"unknown mode {self.mode!r}; choose one of {', '.join(MODES)}")
         if self.velocity_source not in VELOCITY_SOURCES:
@@ -73,21 +86,61 @@ class StreamSettings:
             raise InputError(f"lag must be between 0 and window ({self.window} s), got {self.lag!r}")
         if not (isinstance(self.max_gap, (int, float)) and self.max_gap > 0.0):
             raise InputError(f"max_gap must be a positive number of seconds, got {self.max_gap!r}")
+        if not isinstance(self.kalman, KalmanSettings):
+            raise InputError(f"kalman must be KalmanSettings, got {self.kalman!r}")
 
     @property
     def effective_lag(self) -> float:
         """Seconds between the newest stamp and the stamp an estimate refers to."""
         if self.mode == "causal":
             return 0.0
-        return self.window / 2.0 if self.lag is None else float(self.lag)
+        if self.lag is not None:
+            return float(self.lag)
+        return min(DEFAULT_KALMAN_LAG, self.window) if self.method == "kalman" else self.window / 2.0
+
+    def describe(self) -> str:
+        """One line: the method, its settings and what an output's stamp refers to."""
+        if self.method == "kalman":
+            k = self.kalman
+            what = (
+                f"kalman (noise {k.noise:g}, length_scale {k.length_scale:g} s, magnitude {k.magnitude:g}, "
+                f"warm-up {self.window:g} s)"
+            )
+        elif self.method == "polyfit":
+            what = f"polyfit (window {self.window:g} s, degree {self.order})"
+        else:
+            what = f"difference (window {self.window:g} s)"
+        lag = self.effective_lag
+        when = (
+            "each output at the newest sample, no delay"
+            if lag == 0
+            else f"each output refers to the sample {lag * 1e3:g} ms before the newest"
+        )
+        return f"{what}, {self.mode}: {when}"
+
+    @property
+    def support(self) -> Support:
+        """The samples an estimate needs around its stamp (see :mod:`.coverage`).
+
+        polyfit: its window (ending ``lag`` after the stamp), with at least 2 (order + 1) samples and
+        no stretch longer than window / (order + 1) without one. kalman: ``window`` before the stamp
+        and ``lag`` after, at least :data:`KALMAN_MIN_SAMPLES` samples, no stretch longer than
+        window / 5. difference: the same as kalman, with 5 samples.
+        """
+        lag = self.effective_lag
+        if self.method == "polyfit":
+            return Support(self.window - lag, lag, 2 * (self.order + 1), self.window / (self.order + 1))
+        before = self.window if self.method == "kalman" or self.mode == "causal" else self.window / 2.0
+        return Support(before, lag, KALMAN_MIN_SAMPLES if self.method == "kalman" else 5, self.window / 5.0)
 
 
 @dataclass(frozen=True)
 class JointEstimate:
     """The state of every joint at one stamp.
 
-    Arrays are in the estimator's joint order. A joint that is not ``ready`` (no sample yet, too
-    few samples since its history restarted, or none for longer than max_gap) has NaN entries.
+    Arrays are in the estimator's joint order. A joint that is not ``ready`` has NaN entries: no
+    sample yet, none for longer than max_gap, or samples that do not yet cover the estimator's
+    support around the stamp (after a start, a restart, a gap or a model reload).
 
     Attributes:
         stamp_ns: the stamp the estimate refers to, integer nanoseconds (the input's clock).
@@ -128,15 +181,23 @@ class _Group:
         "_stamps",
         "_velocities",
         "end",
+        "holes",
+        "intervals",
         "joints",
         "last_without_velocity",
         "origin",
         "slots",
         "start",
+        "track",
+        "warming",
     )
 
-    def __init__(self, joints: list[int], origin: int, capacity: int = 256) -> None:
+    def __init__(self, joints: list[int], origin: int, capacity: int = 256, track: KalmanTrack | None = None) -> None:
         self.joints = joints
+        self.track = track
+        self.holes: list[int] = []  # stamps of samples more than the support's max_hole after the previous one
+        self.intervals: deque[int] = deque(maxlen=8)  # the last intervals between samples, ns
+        self.warming: bool | str = False  # whether the current warm-up has been logged ("sparse": warned)
         self.slots = {j: k for k, j in enumerate(joints)}
         self.origin = origin
         self._stamps = np.empty(capacity, dtype=np.int64)
@@ -169,6 +230,11 @@ class _Group:
         """(count, joints), NaN where a message gave none."""
         return self._velocities[self.start : self.end]
 
+    def end_slack(self) -> int | None:
+        """How far, ns, an estimate's support may reach past this group's newest sample: one and a half
+        of its longest recent sample intervals (a jittered sample comes a little late)."""
+        return 3 * max(self.intervals) // 2 if self.intervals else None
+
     def velocities_everywhere_after(self, index: int) -> bool:
         """Whether every sample from ``index`` (in the views above) on has some velocity."""
         return self.last_without_velocity < self.start + index
@@ -180,7 +246,7 @@ class _Group:
     def newest_position(self, joint: int) -> float:
         return float(self._positions[self.end - 1, self.slots[joint]])
 
-    def append(self, stamp_ns: int, positions: list[float], velocities: list[float]) -> None:
+    def append(self, stamp_ns: int, positions: list[float], velocities: list[float], max_hole_ns: int) -> None:
         if self.end == len(self._stamps):
             count = len(self)
             arrays = ("_stamps", "_seconds", "_positions", "_velocities")
@@ -194,6 +260,12 @@ class _Group:
             self.last_without_velocity -= self.start
             self.start, self.end = 0, count
         end = self.end
+        if end > self.start:
+            interval = stamp_ns - int(self._stamps[end - 1])
+            if interval > max_hole_ns:
+                self.holes.append(stamp_ns)
+            else:
+                self.intervals.append(interval)
         self._stamps[end] = stamp_ns
         self._seconds[end] = (stamp_ns - self.origin) / NS
         self._positions[end] = positions
@@ -201,22 +273,30 @@ class _Group:
         if all(v != v for v in velocities):  # all NaN
             self.last_without_velocity = end
         self.end = end + 1
+        if self.track is not None:
+            self.track.add(stamp_ns, self._positions[end], self._velocities[end])
 
     def drop_before(self, stamp_ns: int, keep: int) -> None:
         """Forget samples older than stamp_ns, keeping at least the newest ``keep``."""
         first = self.start + int(np.searchsorted(self.stamps, stamp_ns, side="left"))
         self.start = min(first, max(self.start, self.end - keep))
+        oldest = int(self._stamps[self.start])
+        if self.holes and self.holes[0] <= oldest:
+            self.holes = [h for h in self.holes if h > oldest]
 
     def split(self, joints: list[int]) -> _Group:
         """Move these joints, with their history, into a group of their own; returns it."""
-        moved = _Group(joints, self.origin, capacity=max(len(self._stamps), 16))
         columns = [self.slots[j] for j in joints]
+        track = self.track.select(columns) if self.track is not None else None
+        moved = _Group(joints, self.origin, capacity=max(len(self._stamps), 16), track=track)
         count = len(self)
         moved._stamps[:count] = self.stamps
         moved._seconds[:count] = self.seconds
         moved._positions[:count] = self.positions[:, columns]
         moved._velocities[:count] = self.velocities[:, columns]
         moved.end = count
+        moved.holes = list(self.holes)
+        moved.intervals = self.intervals.copy()
         # -1 claims nothing: the velocities of its first windows are checked sample by sample
         moved.last_without_velocity = -1
         self.remove(joints)
@@ -226,6 +306,8 @@ class _Group:
         """Forget these joints."""
         keep = [j for j in self.joints if j not in joints]
         columns = [self.slots[j] for j in keep]
+        if self.track is not None:
+            self.track = self.track.select(columns)
         self._positions = self._positions[:, columns].copy()
         self._velocities = self._velocities[:, columns].copy()
         self.joints = keep
@@ -285,6 +367,9 @@ class StreamingEstimator:
         self._lag_ns = round(self.settings.effective_lag * NS)
         self._gap_ns = round(self.settings.max_gap * NS)
         self._window_ns = round(self.settings.window * NS)
+        self._support = self.settings.support
+        self._hole_ns = self._support.ns()[2]
+        self._motion = MotionModel(self.settings.kalman) if self.settings.method == "kalman" else None
         self._keep_ns = round((self.settings.window + self.settings.effective_lag) * NS) + self._gap_ns
         self._pending: deque[int] = deque()
         self._intervals: deque[int] = deque(maxlen=8)  # the last stamp intervals, ns
@@ -317,8 +402,15 @@ class StreamingEstimator:
             return []
 
     def flush(self) -> list[JointEstimate]:
-        """Estimates for the stamps still waiting for their lag (end of a stream), from what is there."""
-        return [self._estimate(stamp) for stamp in self._drain()]
+        """The stamps still waiting for their lag (end of a stream, or time going backwards), with no
+        estimates: nothing will come after them, so their supports are never covered."""
+        n = len(self.joint_names)
+        return [
+            JointEstimate(
+                stamp, self.segment, *(np.full(n, np.nan) for _ in range(3)), self.ages(stamp), np.zeros(n, bool)
+            )
+            for stamp in self._drain()
+        ]
 
     def reset(self) -> None:
         """Forget every history (a new stream starts)."""
@@ -502,13 +594,16 @@ class StreamingEstimator:
         for group, values in by_group.values():
             if len(values) < len(group.joints):
                 group = self._split(group, [j for j in group.joints if j in values])
-            group.append(stamp, [values[j][0] for j in group.joints], [values[j][1] for j in group.joints])
+            group.append(
+                stamp, [values[j][0] for j in group.joints], [values[j][1] for j in group.joints], self._hole_ns
+            )
         if fresh:
-            group = _Group(sorted(fresh), self._origin)
+            track = KalmanTrack(self._motion, smooth=self._lag_ns > 0) if self._motion is not None else None
+            group = _Group(sorted(fresh), self._origin, track=track)
             self._groups.append(group)
             for j in group.joints:
                 self._group_of[j] = group
-            group.append(stamp, [fresh[j][0] for j in group.joints], [fresh[j][1] for j in group.joints])
+            group.append(stamp, [fresh[j][0] for j in group.joints], [fresh[j][1] for j in group.joints], self._hole_ns)
         return bool(by_group or fresh)
 
     def _forget(self, group: _Group, joints: list[int]) -> None:
@@ -539,20 +634,22 @@ class StreamingEstimator:
         ages = np.full(n, np.inf)
         for group in self._groups:
             self._estimate_group(target, group, state, ages)
+            if group.track is not None:
+                group.track.forget_before(target)
         ready = np.isfinite(state).all(axis=1)
         if not ready.all():
             state[~ready] = np.nan
         return JointEstimate(target, self.segment, state[:, 0], state[:, 1], state[:, 2], ages, ready)
 
     def _estimate_group(self, target: int, group: _Group, state: np.ndarray, ages: np.ndarray) -> None:
-        """Fill state (n, 3) and ages (n,) at the target for one group's joints.
+        """Fill state (n, 3) and ages (n,) at the target for one group's joints, if its samples cover
+        the support there (else say once why, and leave them NaN).
 
-        Only the samples of the fit's window are touched, however long the kept history is. Joints
-        whose window has a velocity in every sample are fitted on velocities (the acceleration is
-        their derivative); the others on positions. At a sample's own stamp the sample's position,
+        Only the samples of the fit's window are touched, however long the kept history is. polyfit:
+        joints whose window has a velocity in every sample are fitted on velocities (the acceleration
+        is their derivative); the others on positions. At a sample's own stamp the sample's position,
         and its velocity when the message gave one, are used as they are.
         """
-        settings = self.settings
         members = group.joints
         stamps = group.stamps
         k = int(stamps.searchsorted(target, side="right")) - 1
@@ -562,21 +659,36 @@ class StreamingEstimator:
         ages[members] = age_ns / NS
         if age_ns > self._gap_ns:
             return  # stale: not ready
-        lead_ns = self._lag_ns if settings.mode == "fixed_lag" else 0
+        reason = uncovered(stamps, target, self._support, group.holes, group.end_slack())
+        if reason is not None:
+            self._say_why(group, reason)
+            return
+        group.warming = False
+        exact = age_ns == 0  # the target is a sample of this group: its own position is used as it is
+        if group.track is not None:
+            position, velocity, acceleration = group.track.estimate(target)
+        else:
+            position, velocity, acceleration = self._fit(target, group, exact)
+        if exact:
+            position = group.positions[k]
+            given = group.velocities[k]
+            velocity = np.where(np.isfinite(given), given, velocity)  # a message velocity is kept as given
+        state[members, 0], state[members, 1], state[members, 2] = position, velocity, acceleration
+
+    def _fit(self, target: int, group: _Group, exact: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """polyfit or difference over the support's samples (covered): position, velocity, acceleration."""
+        settings = self.settings
+        stamps = group.stamps
+        lead_ns = self._lag_ns
         lo = int(stamps.searchsorted(target + lead_ns - self._window_ns, side="left"))
         hi = int(stamps.searchsorted(target + lead_ns, side="right"))
-        if hi - lo < settings.order + 1:  # a sparse window: the fit widens to the nearest samples
-            lo, hi = 0, len(stamps)
         positions, velocities = group.positions[lo:hi], group.velocities[lo:hi]
-        fitted_velocities = 0
-        if hi - lo >= 2 and group.velocities_everywhere_after(lo):
+        by_velocity = np.zeros(len(group.joints), dtype=bool)
+        if group.velocities_everywhere_after(lo):
             by_velocity = np.isfinite(velocities).all(axis=0)
-            fitted_velocities = int(by_velocity.sum())
-        if len(stamps) < 3 and not fitted_velocities:
-            return  # too few samples to differentiate positions twice
+        fitted_velocities = bool(by_velocity.any())
         times = group.seconds[lo:hi]
         target_s = (target - self._origin) / NS
-        exact = age_ns == 0  # the target is a sample of this group: its own position is used as it is
         if fitted_velocities and exact:
             # One column per joint: its velocities where it has them all, else its positions.
             values = np.where(by_velocity, velocities, positions)
@@ -587,25 +699,44 @@ class StreamingEstimator:
         if settings.method == "difference":
             fitted, d1, d2 = local_difference(times, values, target_s, lead_ns / NS)
         else:
-            fitted, d1, d2 = fit_at(times, values, target_s, settings.window / 2.0, settings.order, lead_ns / NS)
-        m = len(members)
+            fitted, d1, d2 = fit_window(times, values, target_s, settings.window / 2.0, settings.order)
+        m = len(group.joints)
         if fitted_velocities and exact:
-            velocity, acceleration = np.where(by_velocity, fitted, d1), np.where(by_velocity, d1, d2)
-        else:
-            velocity, acceleration = d1[:m], d2[:m]
-            if fitted_velocities:
-                velocity, acceleration = velocity.copy(), acceleration.copy()
-                velocity[by_velocity], acceleration[by_velocity] = fitted[m:], d1[m:]
-        if exact:
-            position = positions[k - lo]
-            given = velocities[k - lo]
-            velocity = np.where(np.isfinite(given), given, velocity)  # a message velocity is kept as given
-        else:
-            position = fitted[:m]
-        if len(stamps) >= 3:
-            state[members, 0], state[members, 1], state[members, 2] = position, velocity, acceleration
-        else:  # only the joints fitted on their velocities
-            rows = np.array(members)[by_velocity]
-            state[rows, 0] = position[by_velocity]
-            state[rows, 1] = velocity[by_velocity]
-            state[rows, 2] = acceleration[by_velocity]
+            return fitted, np.where(by_velocity, fitted, d1), np.where(by_velocity, d1, d2)
+        velocity, acceleration = d1[:m], d2[:m]
+        if fitted_velocities:
+            velocity, acceleration = velocity.copy(), acceleration.copy()
+            velocity[by_velocity], acceleration[by_velocity] = fitted[m:], d1[m:]
+        return fitted[:m], velocity, acceleration
+
+    def _say_why(self, group: _Group, reason: str) -> None:
+        """Log once per warm-up (throttled) why a group's joints have no estimate; warn once per group
+        when its samples are too sparse for the support ever to be covered."""
+        support = self._support
+        names = ", ".join(self.joint_names[j] for j in group.joints)
+        where = f"[stamp - {support.before:g} s, stamp + {support.after:g} s]"
+        recent = np.diff(group.stamps[-17:])
+        interval = float(np.median(recent)) / NS if len(recent) >= 8 else 0.0
+        needed = max(support.min_samples * interval, support.span * interval / support.max_hole) * 1.1
+        if interval and needed > support.span:  # even a steady stream cannot cover the support
+            if group.warming == "sparse":
+                return
+            group.warming = "sparse"
+            self._log.every(
+                ("coverage", "sparse", tuple(group.joints)),
+                logging.WARNING,
+                f"no estimate for joint(s) {names}: a sample every {interval * 1e3:.3g} ms is too sparse for the "
+                f"estimator (at least {support.min_samples} samples in {where}, none more than "
+                f"{support.max_hole:g} s apart); increase estimator.window to at least {needed:.2g} s",
+            )
+            return
+        if group.warming:
+            return
+        group.warming = True
+        self._log.every(
+            ("coverage", "warm-up", tuple(group.joints)),
+            logging.INFO,
+            f"no estimate yet for joint(s) {names} ({reason}): estimates start where their samples cover "
+            f"{where}, at least {support.min_samples} of them, none more than {support.max_hole:g} s apart "
+            "(after a start, a restart, a gap or a model reload)",
+        )

@@ -153,10 +153,12 @@ def imu(result: Result, link: int, frame_prefix: str = "") -> Message:
 
 def markers(result: Result, frame_prefix: str = "", scale: float = 0.02) -> Message:
     """visualization_msgs/MarkerArray: per link an ARROW from its centre of mass along its COM
-    acceleration (specific force), ``scale`` m per m/s^2, in the root frame; id = link index."""
+    acceleration (specific force), ``scale`` m per m/s^2, in the root frame; id = the link's index in
+    the model (the same link keeps its id when only some links are published)."""
     root = result.in_root
     out = []
     frame = frame_prefix + result.root_link
+    ids = result.ids
     for k in range(len(result.link_names)):
         start = root.com_position[k]
         end = start + scale * root.com_accel[k]
@@ -164,7 +166,7 @@ def markers(result: Result, frame_prefix: str = "", scale: float = 0.02) -> Mess
             {
                 "header": header(result.stamp_ns, frame),
                 "ns": MARKER_NAMESPACE,
-                "id": k,
+                "id": ids[k],
                 "type": _ARROW,
                 "action": _ADD,
                 "pose": {"orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
@@ -206,13 +208,39 @@ def all_messages(result: Result, settings: NodeSettings) -> list[tuple[str, Mess
     return out
 
 
+class Templates:
+    """link_states and com_states templates (:class:`neforward_ros.wire.cdr.MultiDofTemplate`), one
+    pair per set of links published: the whole model, or the links determined while some joints
+    have no estimate. Made on first use; the :data:`KEPT` most recent sets are kept."""
+
+    KEPT = 16
+
+    def __init__(self, frame_prefix: str) -> None:
+        self.frame_prefix = frame_prefix
+        self._pairs: dict[tuple[str, tuple[str, ...]], tuple[cdr.MultiDofTemplate, cdr.MultiDofTemplate]] = {}
+
+    def __call__(self, result: Result) -> tuple[cdr.MultiDofTemplate, cdr.MultiDofTemplate]:
+        key = (result.root_link, result.link_names)
+        found = self._pairs.get(key)
+        if found is None:
+            if len(self._pairs) >= self.KEPT:
+                del self._pairs[next(iter(self._pairs))]
+            first = result.sample(0) if result.table.ndim == 3 else result
+            found = (
+                cdr.MultiDofTemplate(cdr.encode(LINK_STATES_TYPE, link_states(first, self.frame_prefix))),
+                cdr.MultiDofTemplate(cdr.encode(LINK_STATES_TYPE, com_states(first, self.frame_prefix))),
+            )
+            self._pairs[key] = found
+        return found
+
+
 class Encoder:
     """The CDR bytes of every output of a result: what the node publishes.
 
-    link_states and com_states, published for every result, are patched into per-model templates
-    (:class:`neforward_ros.wire.cdr.MultiDofTemplate`) instead of being built as contents and
-    encoded; the per-link topics and the markers are built and encoded. Either way the bytes are
-    those of :func:`all_messages` encoded by :func:`neforward_ros.wire.cdr.encode` (tested).
+    link_states and com_states, published for every result, are patched into :class:`Templates`
+    instead of being built as contents and encoded; the per-link topics and the markers are built
+    and encoded. Either way the bytes are those of :func:`all_messages` encoded by
+    :func:`neforward_ros.wire.cdr.encode` (tested).
     """
 
     def __init__(self, settings: NodeSettings) -> None:
@@ -220,23 +248,16 @@ class Encoder:
         self._types = {output.topic: output.type for output in output_list(
             settings.accel_links, settings.imu_links, settings.publish_markers
         )}  # fmt: skip
-        self._templates: dict[str, cdr.MultiDofTemplate] = {}
-        self._names: tuple[str, ...] = ()
+        self.templates = Templates(settings.frame_prefix)
 
     def encode(self, result: Result) -> list[tuple[str, bytes]]:
         settings = self.settings
-        if result.link_names != self._names:  # a new model: new templates
-            prefix = settings.frame_prefix
-            self._templates = {
-                LINK_STATES: cdr.MultiDofTemplate(cdr.encode(LINK_STATES_TYPE, link_states(result, prefix))),
-                COM_STATES: cdr.MultiDofTemplate(cdr.encode(LINK_STATES_TYPE, com_states(result, prefix))),
-            }
-            self._names = result.link_names
+        link_template, com_template = self.templates(result)
         stamp = result.stamp_ns
         link_blocks, com_blocks = result.blocks
         out = [
-            (LINK_STATES, self._templates[LINK_STATES].encode(stamp, *link_blocks)),
-            (COM_STATES, self._templates[COM_STATES].encode(stamp, *com_blocks)),
+            (LINK_STATES, link_template.encode(stamp, *link_blocks)),
+            (COM_STATES, com_template.encode(stamp, *com_blocks)),
         ]
         rest = per_link_messages(result, settings.accel_links, settings.imu_links, settings.frame_prefix)
         if settings.publish_markers:

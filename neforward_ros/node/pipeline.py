@@ -22,6 +22,7 @@ from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel, load_model
 from neforward_ros.node import messages
 from neforward_ros.node.names import is_token
+from neforward_ros.node.policy import apply_policy, hold_vector
 from neforward_ros.node.result import Result, make_result
 from neforward_ros.node.settings import NodeSettings
 from neforward_ros.node.topics import ROBOT_DESCRIPTION, Output, output_list
@@ -57,6 +58,7 @@ class Pipeline:
         self.model: RobotModel | None = None
         self._estimator: StreamingEstimator | None = None
         self._encoder: messages.Encoder | None = None
+        self._hold = np.zeros(0)
         for link in (*settings.accel_links, *settings.imu_links):
             if not is_token(link):
                 raise ModelError(f"link {link!r} cannot be part of a ROS 2 topic name (letters, digits, _)")
@@ -94,6 +96,14 @@ class Pipeline:
                 f"accel_links/imu_links name links that robot {model.name!r} does not have: {', '.join(missing)}; "
                 "nothing is published for them",
             )
+        unknown_held = [name for name in self.settings.hold_positions if name not in model.joint_index]
+        if unknown_held:
+            self._log.log(
+                logging.ERROR,
+                f"hold.joint_names name joints that robot {model.name!r} does not have (or mimic joints, which "
+                f"follow their leader): {', '.join(unknown_held)}; ignored",
+            )
+        self._hold = hold_vector(model.joint_names, self.settings.hold_positions)
         kernel_of(model)  # generate the recursion now, not while the first joint states wait
         self.model = model
         self._estimator = StreamingEstimator(
@@ -229,19 +239,32 @@ class Pipeline:
         return self._result(estimate)
 
     def _result(self, estimate: JointEstimate) -> Result | None:
+        """The recursion on one estimate, under the publish policy (:mod:`.policy`) when some joints
+        have none."""
         model = self.model
         assert model is not None
+        settings = self.settings
+        q, qd, qdd = estimate.positions, estimate.velocities, estimate.accelerations
+        determined = None
         if not estimate.all_ready:
-            waiting = [n for n, ok in zip(model.joint_names, estimate.ready, strict=True) if not ok]
-            self._log.every(
-                "not-ready",
-                logging.WARNING,
-                f"nothing published: no recent state for joint(s) {', '.join(waiting)} "
-                "(never received, just restarted, or silent for longer than max_gap)",
-            )
-            return None
+            silent = estimate.ages > settings.estimator.max_gap
+            published = apply_policy(settings.publish_policy, q, qd, qdd, estimate.ready, silent, self._hold)
+            if not published.known.all():
+                waiting = ", ".join(n for n, ok in zip(model.joint_names, published.known, strict=True) if not ok)
+                why = "never received, silent for longer than max_gap, or warming up (see the estimator's log)"
+                if not published.publish:
+                    self._log.every(
+                        "not-ready", logging.WARNING, f"nothing published: no estimate for joint(s) {waiting} ({why})"
+                    )
+                    return None
+                determined = model.determined_links(published.known)
+                self._log.every(
+                    "partial",
+                    logging.WARNING,
+                    f"publishing {int(determined.sum())} of {len(determined)} links: no estimate for joint(s) "
+                    f"{waiting} ({why}); the links they move are left out",
+                )
+            q, qd, qdd = published.q, published.qd, published.qdd
         # The estimator's and the supplied states are finite by construction: no input checks here.
-        table = kinematics_table(
-            model, estimate.positions, estimate.velocities, estimate.accelerations, root_state(self.settings.gravity)
-        )
-        return make_result(model, estimate.stamp_ns, table)
+        table = kinematics_table(model, q, qd, qdd, root_state(settings.gravity))
+        return make_result(model, estimate.stamp_ns, table, determined)

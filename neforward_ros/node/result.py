@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
@@ -19,15 +20,54 @@ class Result:
 
     Attributes:
         stamp_ns: the stamp of the joint state it comes from, integer nanoseconds; (T,) for a batch.
-        link_names, root_link: the model's.
-        table: the recursion's rows, (n_links, ROW) or (T, n_links, ROW)
+        link_names, root_link: the links published, in the model's order, and the model's root.
+        table: the recursion's rows of those links, (n_links, ROW) or (T, n_links, ROW)
             (see :func:`neforward_ros.recursion.kinematics_table`).
+        link_ids: each row's link index in the model (marker ids); None when the rows are every link.
+        determined: a batch's (T, n_links) per sample, whether the link's numbers are estimates (every
+            joint that moves it had one); None when all are. :meth:`runs` splits a batch by it.
     """
 
     stamp_ns: Any
     link_names: tuple[str, ...]
     root_link: str
     table: np.ndarray
+    link_ids: tuple[int, ...] | None = None
+    determined: np.ndarray | None = None
+
+    @property
+    def ids(self) -> tuple[int, ...]:
+        """Each row's link index in the model."""
+        return self.link_ids if self.link_ids is not None else tuple(range(len(self.link_names)))
+
+    def only(self, links: np.ndarray) -> Result:
+        """The same result for the links where ``links`` (n_links,) is True."""
+        keep = np.flatnonzero(links)
+        if len(keep) == len(self.link_names):
+            return replace(self, determined=None)
+        ids = self.ids
+        return replace(
+            self,
+            link_names=tuple(self.link_names[k] for k in keep),
+            table=self.table[..., keep, :],
+            link_ids=tuple(ids[k] for k in keep),
+            determined=None,
+        )
+
+    def runs(self) -> list[tuple[slice, Result]]:
+        """A batch as runs of consecutive samples with the same determined links: (samples, the run's
+        result for those links only)."""
+        count = len(self.stamp_ns)
+        if self.determined is None or self.determined.all():
+            return [(slice(0, count), replace(self, determined=None))]
+        changes = np.flatnonzero(np.any(self.determined[1:] != self.determined[:-1], axis=1)) + 1
+        edges = [0, *changes.tolist(), count]
+        out = []
+        for start, stop in itertools.pairwise(edges):
+            part = slice(start, stop)
+            run = replace(self, stamp_ns=self.stamp_ns[part], table=self.table[part], determined=None)
+            out.append((part, run.only(self.determined[start])))
+        return out
 
     @cached_property
     def blocks(self) -> tuple[Blocks, Blocks]:
@@ -45,17 +85,23 @@ class Result:
         return self.in_link.in_root()
 
     def sample(self, index: int) -> Result:
-        """One sample of a batched result. Its message numbers are the batch's own, so the
-        messages of a sample are byte for byte those of the batch."""
-        sample = replace(self, stamp_ns=int(self.stamp_ns[index]), table=self.table[index])
+        """One sample of a batched result (all of whose links are determined). Its message numbers
+        are the batch's own, so the messages of a sample are byte for byte those of the batch."""
+        sample = replace(self, stamp_ns=int(self.stamp_ns[index]), table=self.table[index], determined=None)
         if "blocks" in self.__dict__:
             sample.__dict__["blocks"] = tuple(tuple(b[index] for b in blocks) for blocks in self.blocks)
         return sample
 
 
-def make_result(model: RobotModel, stamp_ns: Any, table: np.ndarray) -> Result:
-    """A Result from the recursion's rows, for one sample or a batch."""
-    return Result(stamp_ns=stamp_ns, link_names=model.link_names, root_link=model.root_link, table=table)
+def make_result(model: RobotModel, stamp_ns: Any, table: np.ndarray, determined: np.ndarray | None = None) -> Result:
+    """A Result from the recursion's rows of every link, for one sample or a batch; ``determined``
+    (n_links,) for one sample keeps only those links, (T, n_links) for a batch marks them."""
+    result = Result(stamp_ns=stamp_ns, link_names=model.link_names, root_link=model.root_link, table=table)
+    if determined is None or determined.all():
+        return result
+    if determined.ndim == 1:
+        return result.only(determined)
+    return replace(result, determined=determined)
 
 
 # Columns of the recursion's rows (kernel.SLICES) that the two MultiDOF messages take.

@@ -15,13 +15,23 @@ from pathlib import Path
 from typing import Any
 
 from neforward_ros.errors import InputError
-from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW, METHODS
-from neforward_ros.estimation.stream import DEFAULT_MAX_GAP, MODES, VELOCITY_SOURCES, StreamSettings
+from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW
+from neforward_ros.estimation.motion import KalmanSettings
+from neforward_ros.estimation.stream import (
+    DEFAULT_KALMAN_LAG,
+    DEFAULT_MAX_GAP,
+    METHODS,
+    MODES,
+    VELOCITY_SOURCES,
+    StreamSettings,
+)
+from neforward_ros.node.policy import PUBLISH_POLICIES
 from neforward_ros.node.ros_args import RosArgs, parse_ros_args
 from neforward_ros.recursion import DEFAULT_GRAVITY
 
 NODE_NAME = "neforward"
 ACCELERATION_SOURCES = ("estimate", "supplied")
+_KALMAN = KalmanSettings()
 
 
 @dataclass(frozen=True)
@@ -66,12 +76,66 @@ PARAMETERS: tuple[Parameter, ...] = (
         "estimate: from joint_states. supplied: q, qd, qdd as given on joint_states_accel "
         "(trajectory_msgs/JointTrajectory).",
     ),
-    Parameter("estimator.method", "string", "polyfit", f"Derivative estimator: {' or '.join(METHODS)}."),
-    Parameter("estimator.mode", "string", "fixed_lag", "fixed_lag (accurate, delayed by lag) or causal (no delay)."),
-    Parameter("estimator.window", "double", DEFAULT_WINDOW, "Width of the local fit, s."),
-    Parameter("estimator.order", "int", DEFAULT_ORDER, "Degree of the local polynomial."),
-    Parameter("estimator.lag", "double", -1.0, "fixed_lag delay, s, at most window. Negative: window / 2."),
+    Parameter(
+        "estimator.method",
+        "string",
+        "polyfit",
+        "polyfit (local polynomial fit), kalman (Kalman filter / fixed-lag smoother, accurate at low delay) "
+        "or difference (a baseline).",
+    ),
+    Parameter(
+        "estimator.mode",
+        "string",
+        "fixed_lag",
+        "fixed_lag (each estimate lag behind the newest sample) or causal (at the newest sample, no delay).",
+    ),
+    Parameter(
+        "estimator.window",
+        "double",
+        DEFAULT_WINDOW,
+        "polyfit: width of the local fit, s. kalman: the samples an estimate needs before its stamp, s.",
+    ),
+    Parameter("estimator.order", "int", DEFAULT_ORDER, "Degree of the local polynomial (polyfit)."),
+    Parameter(
+        "estimator.lag",
+        "double",
+        -1.0,
+        f"fixed_lag delay, s, at most window. Negative: window / 2 (polyfit), {DEFAULT_KALMAN_LAG} (kalman).",
+    ),
+    Parameter(
+        "estimator.kalman.noise",
+        "double",
+        _KALMAN.noise,
+        "kalman: standard deviation of the positions' noise, rad (m); quantisation step / sqrt(12) for an encoder.",
+    ),
+    Parameter(
+        "estimator.kalman.velocity_noise",
+        "double",
+        _KALMAN.velocity_noise,
+        "kalman: standard deviation of the noise of velocities the messages carry, rad/s (m/s).",
+    ),
+    Parameter(
+        "estimator.kalman.length_scale",
+        "double",
+        _KALMAN.length_scale,
+        "kalman: s; about 0.65 / (the highest frequency of the joints' motion, Hz).",
+    ),
+    Parameter(
+        "estimator.kalman.magnitude",
+        "double",
+        _KALMAN.magnitude,
+        "kalman: typical excursion of the joints' motion about its trend, rad (m).",
+    ),
     Parameter("max_gap", "double", DEFAULT_MAX_GAP, "A joint silent for longer than this, s, restarts its history."),
+    Parameter(
+        "publish_policy",
+        "string",
+        "partial",
+        "When some joints have no estimate: partial (publish the links every joint above which has one), "
+        "wait (publish nothing), or hold (joints silent for longer than max_gap held at hold.positions).",
+    ),
+    Parameter("hold.joint_names", "string[]", [], "hold: joints with a hold position other than 0."),
+    Parameter("hold.positions", "double[]", [], "hold: their positions, rad (m), in the order of hold.joint_names."),
     Parameter("accel_links", "string[]", [], "Links that get ~/<link>/accel and ~/<link>/twist (link frame)."),
     Parameter("imu_links", "string[]", [], "Links that get a virtual IMU, ~/<link>/imu (sensor_msgs/Imu)."),
     Parameter("publish_markers", "bool", False, "Publish ~/markers: an arrow per link for its COM acceleration."),
@@ -118,6 +182,8 @@ class NodeSettings:
         gravity: m/s^2 in the root frame.
         acceleration_source: "estimate" or "supplied".
         estimator: the streaming estimator's settings.
+        publish_policy: "partial", "wait" or "hold".
+        hold_positions: joint name -> position held under the "hold" policy (others: 0).
         accel_links, imu_links: links with per-link topics.
         publish_markers: whether ~/markers is published.
         marker_scale: m per m/s^2.
@@ -131,6 +197,8 @@ class NodeSettings:
     gravity: tuple[float, float, float] = DEFAULT_GRAVITY
     acceleration_source: str = "estimate"
     estimator: StreamSettings = field(default_factory=StreamSettings)
+    publish_policy: str = "partial"
+    hold_positions: Mapping[str, float] = field(default_factory=dict)
     accel_links: tuple[str, ...] = ()
     imu_links: tuple[str, ...] = ()
     publish_markers: bool = False
@@ -166,7 +234,12 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
     gravity = merged["gravity"]
     if len(gravity) != 3:
         raise InputError(f"parameter gravity must have 3 components, got {len(gravity)}")
-    for name, choices in (("velocity_source", VELOCITY_SOURCES), ("acceleration_source", ACCELERATION_SOURCES)):
+    for name, choices in (
+        ("velocity_source", VELOCITY_SOURCES),
+        ("acceleration_source", ACCELERATION_SOURCES),
+        ("publish_policy", PUBLISH_POLICIES),
+        ("estimator.method", METHODS),
+    ):
         if merged[name] not in choices:
             raise InputError(f"parameter {name} must be one of {', '.join(choices)}, got {merged[name]!r}")
     if merged["estimator.mode"] not in MODES:
@@ -175,8 +248,20 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         )
     if merged["qos_depth"] < 1:
         raise InputError(f"parameter qos_depth must be at least 1, got {merged['qos_depth']}")
+    hold_names, hold_values = merged["hold.joint_names"], merged["hold.positions"]
+    if len(hold_names) != len(hold_values):
+        raise InputError(
+            f"parameters hold.joint_names and hold.positions must have the same length, "
+            f"got {len(hold_names)} and {len(hold_values)}"
+        )
     lag = merged["estimator.lag"]
     try:
+        kalman = KalmanSettings(
+            noise=merged["estimator.kalman.noise"],
+            velocity_noise=merged["estimator.kalman.velocity_noise"],
+            length_scale=merged["estimator.kalman.length_scale"],
+            magnitude=merged["estimator.kalman.magnitude"],
+        )
         estimator = StreamSettings(
             method=merged["estimator.method"],
             window=merged["estimator.window"],
@@ -185,6 +270,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
             lag=None if lag < 0 else lag,
             max_gap=merged["max_gap"],
             velocity_source=merged["velocity_source"],
+            kalman=kalman,
         )
     except InputError as exc:
         raise InputError(f"estimator parameters: {exc}") from exc
@@ -194,6 +280,8 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         gravity=tuple(gravity),
         acceleration_source=merged["acceleration_source"],
         estimator=estimator,
+        publish_policy=merged["publish_policy"],
+        hold_positions=dict(zip(hold_names, hold_values, strict=True)),
         accel_links=tuple(merged["accel_links"]),
         imu_links=tuple(merged["imu_links"]),
         publish_markers=merged["publish_markers"],

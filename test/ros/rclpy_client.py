@@ -92,6 +92,11 @@ class Client(Node):
         q, qd, qdd = trajectory(plan, t_ns / NS)
         header_ns = 0 if plan.get("zero_stamps") else plan["epoch_ns"] + t_ns
         names = plan["names"]
+        omit = plan.get("omit", [])
+        if omit:  # joints nobody publishes
+            keep = [i for i, name in enumerate(names) if name not in omit]
+            names = [names[i] for i in keep]
+            q, qd, qdd = ([x[i] for i in keep] for x in (q, qd, qdd))
         if plan.get("supplied"):
             message = JointTrajectory(joint_names=names)
             message.header.stamp = stamp(header_ns)

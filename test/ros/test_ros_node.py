@@ -60,6 +60,7 @@ def check_moving_robot(received: dict, plan: dict, velocities_given: bool) -> No
         assert received[topic], f"nothing on {topic}"
     links = expected.interior(received["/neforward/link_states"])
     assert len(links) >= 0.6 * plan["count"], len(links)
+    assert all(m["joint_names"] == list(MODEL.link_names) for m in received["/neforward/link_states"])
     for com in (False, True):
         topic = "/neforward/com_states" if com else "/neforward/link_states"
         messages = expected.interior(received[topic])
@@ -101,13 +102,14 @@ def test_ros2_run_with_a_params_file_gives_the_moving_robots_kinematics(graph, t
         params_file(tmp_path, **panda_parameters()),
     )  # fmt: skip
     node.wait_for("model 'panda'")
-    # Fixed-lag (0.1 s, the default) answers every stamp but the last 0.1 s of the stream (20 samples).
-    plan = moving_plan(MODEL, velocities=velocities, record=OUTPUTS, expect=380)
+    # Fixed-lag (0.1 s, the default) answers every stamp whose fit window (0.1 s either side) is covered:
+    # all but the first and the last 0.1 s of the stream (20 samples each).
+    plan = moving_plan(MODEL, velocities=velocities, record=OUTPUTS, expect=360)
     received = graph.client(plan)
     check_moving_robot(received, plan, velocities)
     sent = [plan["epoch_ns"] + k * 5_000_000 for k in range(plan["count"])]
     for topic in OUTPUTS:  # nothing lost, and each output carries its input's stamp
-        assert [stamp_ns(m) for m in received[topic]] == sent[:380], topic
+        assert [stamp_ns(m) for m in received[topic]] == sent[20:380], topic
     assert "Traceback" not in node.log() and "ERROR" not in node.log()
 
 
@@ -116,12 +118,39 @@ def test_model_from_the_robot_description_topic_of_another_process(graph) -> Non
     node = graph.start("ros2", "run", "neforward_ros", "neforward_node")
     node.wait_for("model 'panda' from the robot_description topic")
     plan = moving_plan(MODEL, count=100, record={"/neforward/link_states": OUTPUTS["/neforward/link_states"]})
-    received = graph.client({**plan, "expect": 80})
+    received = graph.client({**plan, "expect": 60})
     expected = Expected(PANDA, plan)
     messages = expected.interior(received["/neforward/link_states"], 0.1)
     assert len(messages) >= 40
     errors = multi_dof_errors(messages, expected)
     assert errors["accel"] <= ESTIMATED["accel"] and errors["translation"] <= EXACT, errors
+
+
+def test_a_joint_nobody_publishes_leaves_out_only_the_links_it_moves(graph, tmp_path) -> None:
+    """robot_state_publisher publishes what it can: so does the node (publish_policy partial, the
+    default). The gripper's driver is off: the fingers are left out, the arm is published."""
+    node = graph.start(
+        "ros2", "run", "neforward_ros", "neforward_node", "--ros-args", "--params-file",
+        params_file(tmp_path, **panda_parameters()),
+    )  # fmt: skip
+    node.wait_for("model 'panda'")
+    record = {topic: OUTPUTS[topic] for topic in ("/neforward/link_states", "/neforward/com_states")}
+    record[f"/neforward/{HAND}/accel"] = OUTPUTS[f"/neforward/{HAND}/accel"]
+    plan = moving_plan(MODEL, omit=["panda_finger_joint1"], record=record, expect=360)
+    received = graph.client(plan)
+    arm = [name for name in MODEL.link_names if "finger" not in name]
+    expected = Expected(PANDA, plan)
+    for topic in ("/neforward/link_states", "/neforward/com_states"):
+        messages = received[topic]
+        assert len(messages) == 360 and all(m["joint_names"] == arm for m in messages), topic
+        errors = multi_dof_errors(expected.interior(messages), expected, com=topic.endswith("com_states"))
+        for field, error in errors.items():
+            bound = EXACT if field in ("translation", "rotation") else ESTIMATED[field]
+            assert error <= bound, f"{topic} {field}: relative error {error:.2e} > {bound:.0e}"
+    assert len(received[f"/neforward/{HAND}/accel"]) == 360  # the hand does not move with the fingers
+    log = node.log()
+    assert f"publishing {len(arm)} of {len(MODEL.link_names)} links" in log and "panda_finger_joint1" in log
+    assert "no estimate yet for joint(s)" in log  # the warm-up at the start, said once
 
 
 def test_supplied_states_are_used_exactly(graph, tmp_path) -> None:
@@ -264,7 +293,7 @@ def test_a_message_that_fails_in_handling_is_logged_and_the_node_keeps_going(gra
 def test_best_effort_joint_states_connect_with_the_qos_override(graph, tmp_path) -> None:
     """Many drivers publish joint states best effort, which a reliable subscription cannot match."""
     link_states = {"/neforward/link_states": OUTPUTS["/neforward/link_states"]}
-    plan = moving_plan(MODEL, count=60, record=link_states, best_effort=True)
+    plan = moving_plan(MODEL, count=100, record=link_states, best_effort=True)
     for command in (["neforward_node"], ["neforward", "run"]):
         default = graph.start(
             "ros2", "run", "neforward_ros", *command, "--ros-args", "--params-file",
@@ -280,7 +309,7 @@ def test_best_effort_joint_states_connect_with_the_qos_override(graph, tmp_path)
             params_file(tmp_path, **panda_parameters(qos_overrides=override)),
         )  # fmt: skip
         node.wait_for("model 'panda'")
-        received = graph.client({**plan, "expect": 40})
+        received = graph.client({**plan, "expect": 60})
         assert len(received["/neforward/link_states"]) >= 30, (command, len(received["/neforward/link_states"]))
         assert node.interrupt() == 0
 

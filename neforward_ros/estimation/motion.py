@@ -1,0 +1,166 @@
+"""The Kalman estimator's model of one joint's motion, as a linear stochastic system on irregular stamps.
+
+A joint position is modelled as the sum of two independent parts, each a Gaussian process written as
+a linear stochastic differential equation (the state-space form of Gaussian-process regression,
+Hartikainen and Särkkä 2010), so that filtering and smoothing cost O(1) per sample:
+
+- a trend: constant acceleration driven by white jerk of intensity :data:`TREND_JERK`
+  (states c, c', c''), which carries offsets, ramps (a turning wheel) and slow accelerations;
+- the motion itself: a stationary Matérn process of smoothness nu = ORDER - 1/2, standard deviation
+  ``magnitude`` and length scale ``length_scale``. For large nu it approaches the squared-exponential
+  kernel: its spectrum falls off steeply above about 1 / (2 length_scale) Hz, which is what lets a
+  causal estimate of the second derivative stay accurate where a polynomial model (constant jerk)
+  cannot. Its state is g, g' / lam, ..., g^(ORDER-1) / lam^(ORDER-1) with lam = sqrt(2 nu) / length_scale,
+  scaled so that every entry has the same order of magnitude.
+
+Positions are measured with white noise of standard deviation ``noise`` and, when the message
+carries them, velocities with ``velocity_noise``.
+
+The transition over dt is exact for any dt: the Matérn generator is lam (C - I) with C - I nilpotent
+((C - I)^ORDER = 0), so exp(A dt) is a short polynomial, and the process noise integral is a sum of
+incomplete gamma functions, evaluated by a series with positive terms only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from neforward_ros.errors import InputError
+
+ORDER = 12
+"""States of the Matérn part (smoothness nu = ORDER - 1/2)."""
+TREND_JERK = 1e-2
+"""Intensity of the white jerk that drives the trend, rad^2/s^5 (m^2/s^5 for prismatic joints)."""
+TREND_PRIOR = (10.0, 10.0, 100.0)
+"""Standard deviations of the trend's position, velocity and acceleration before the first sample."""
+
+
+@dataclass(frozen=True)
+class KalmanSettings:
+    """The Kalman estimator's noise levels and motion model (see the module docstring).
+
+    Attributes:
+        noise: standard deviation of the position measurements, rad (m for prismatic joints):
+            encoder noise, or quantisation step / sqrt(12).
+        velocity_noise: standard deviation of the velocities a message carries, rad/s (m/s).
+        length_scale: s; the motion's spectrum falls off above about 1 / (2 length_scale) Hz. Set it
+            to about 0.65 / (the highest frequency of the joints' motion, Hz).
+        magnitude: typical excursion of the motion around its trend, rad (m).
+    """
+
+    noise: float = 1e-4
+    velocity_noise: float = 1e-3
+    length_scale: float = 0.4
+    magnitude: float = 0.3
+
+    def __post_init__(self) -> None:
+        for name in ("noise", "velocity_noise", "length_scale", "magnitude"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0.0 < value < math.inf):
+                raise InputError(f"kalman {name} must be a positive number, got {value!r}")
+
+
+class MotionModel:
+    """The linear system of :class:`KalmanSettings`: transitions, noise and read-outs.
+
+    State layout: [c, c', c'', g, g'/lam, ..., g^(ORDER-1)/lam^(ORDER-1)]; position = c + g.
+
+    Attributes:
+        dim: the state's size.
+        position_row, velocity_row: read-out rows (dim,) of the position and the velocity.
+        readout: (3, dim): position, velocity and acceleration from a state.
+        prior: (dim, dim) covariance of a state before any sample (the Matérn part stationary).
+    """
+
+    def __init__(self, settings: KalmanSettings) -> None:
+        self.settings = settings
+        n = ORDER
+        nu = n - 0.5
+        lam = math.sqrt(2.0 * nu) / settings.length_scale
+        self.lam = lam
+        self.dim = 3 + n
+        # Generator of the Matern part: lam * (S - e_n b^T) with b_k = binomial(n, k); its
+        # characteristic polynomial is (s + lam)^n, so N = A + lam I is nilpotent.
+        companion = np.zeros((n, n))
+        companion[:-1, 1:] = np.eye(n - 1)
+        companion[-1, :] = [-math.comb(n, k) for k in range(n)]
+        nilpotent = lam * (companion + np.eye(n))
+        powers = [np.eye(n)]
+        for _ in range(1, n):
+            powers.append(powers[-1] @ nilpotent)
+        self._powers = np.stack([p / math.factorial(k) for k, p in enumerate(powers)])  # N^k / k!
+        self._powers_flat = np.ascontiguousarray(self._powers.reshape(n, n * n).T)  # (n*n, n)
+        # Stationary covariance for unit white-noise intensity, scaled to the magnitude.
+        unit = _stationary_covariance(lam * companion)
+        intensity = settings.magnitude**2 / unit[0, 0]
+        self._stationary = unit * intensity
+        # Q(dt) = sum_m M_m int_0^dt tau^m exp(-2 lam tau) dtau, M_m = sum_{j+k=m} N^j/j! Qc (N^k/k!)^T,
+        # and int_0^dt tau^m exp(-2 lam tau) dtau = m! / (2 lam)^(m+1) * P(m + 1, 2 lam dt).
+        last = self._powers[:, :, -1] * math.sqrt(intensity)  # N^j/j! Qc^(1/2): Qc = intensity e_n e_n^T
+        terms = np.zeros((2 * n - 1, n, n))
+        for j in range(n):
+            for k in range(n):
+                terms[j + k] += np.outer(last[j], last[k])
+        scale = np.array([math.factorial(m) / (2.0 * lam) ** (m + 1) for m in range(2 * n - 1)])
+        self._noise_terms = np.ascontiguousarray((terms * scale[:, None, None]).reshape(2 * n - 1, n * n).T)
+        self._exponents = np.arange(n, dtype=float)
+        self.position_row = np.zeros(self.dim)
+        self.position_row[[0, 3]] = 1.0
+        self.velocity_row = np.zeros(self.dim)
+        self.velocity_row[[1, 4]] = (1.0, lam)
+        self.readout = np.zeros((3, self.dim))
+        self.readout[0] = self.position_row
+        self.readout[1] = self.velocity_row
+        self.readout[2, [2, 5]] = (1.0, lam * lam)
+        self.prior = np.zeros((self.dim, self.dim))
+        self.prior[:3, :3] = np.diag(np.square(TREND_PRIOR))
+        self.prior[3:, 3:] = self._stationary
+
+    def transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """(F, Q) over dt seconds: x(t + dt) = F x(t) + w, w ~ N(0, Q)."""
+        n = ORDER
+        transition = np.zeros((self.dim, self.dim))
+        noise = np.zeros((self.dim, self.dim))
+        # Trend: constant acceleration with white jerk.
+        dt2 = dt * dt
+        transition[0, 0] = transition[1, 1] = transition[2, 2] = 1.0
+        transition[0, 1] = transition[1, 2] = dt
+        transition[0, 2] = 0.5 * dt2
+        j = TREND_JERK
+        noise[0, 0] = j * dt2 * dt2 * dt / 20.0
+        noise[0, 1] = noise[1, 0] = j * dt2 * dt2 / 8.0
+        noise[0, 2] = noise[2, 0] = j * dt2 * dt / 6.0
+        noise[1, 1] = j * dt2 * dt / 3.0
+        noise[1, 2] = noise[2, 1] = j * dt2 / 2.0
+        noise[2, 2] = j * dt
+        # Matern part: exp(A dt) = exp(-lam dt) sum_k N^k dt^k / k!, and Q as a sum of gamma terms.
+        transition[3:, 3:] = (self._powers_flat @ (dt**self._exponents)).reshape(n, n) * math.exp(-self.lam * dt)
+        noise[3:, 3:] = (self._noise_terms @ _lower_gamma_regularized(2 * n - 1, 2.0 * self.lam * dt)).reshape(n, n)
+        return transition, noise
+
+
+_RECIPROCALS = 1.0 / np.arange(1, 4097)
+
+
+def _lower_gamma_regularized(count: int, x: float) -> np.ndarray:
+    """P(m + 1, x) for m = 0 .. count - 1: exp(-x) sum_{j > m} x^j / j!, summed from the tail up (all
+    terms positive, so accurate for small and large x alike)."""
+    terms = min(count + int(x + 10.0 * math.sqrt(x) + 25.0), len(_RECIPROCALS))
+    series = np.cumprod(x * _RECIPROCALS[:terms])  # x^j / j!, j = 1 .. terms
+    tails = np.cumsum(series[::-1])[::-1]  # sum_{i >= j} x^i / i!
+    return math.exp(-x) * tails[:count]
+
+
+def _stationary_covariance(generator: np.ndarray) -> np.ndarray:
+    """P with A P + P A^T + e_n e_n^T = 0 (unit white noise into the last state), by vectorisation."""
+    n = len(generator)
+    identity = np.eye(n)
+    system = np.kron(identity, generator) + np.kron(generator, identity)
+    source = np.zeros((n, n))
+    source[-1, -1] = 1.0
+    solution = np.linalg.solve(system, -source.reshape(-1))
+    covariance = solution.reshape(n, n)
+    return 0.5 * (covariance + covariance.T)
