@@ -51,6 +51,19 @@ def median_seconds(functions: dict[str, Callable[[], object]], repeats: int) -> 
     return {name: statistics.median(values) for name, values in times.items()}
 
 
+def compare_batches(
+    ours: Callable[[], object], peer: Callable[[], object], samples: int, repeats: int, target: float
+) -> None:
+    """Time a batched call of ours against the peer's loop (medians of interleaved repeats) and print
+    both and the throughput ratio."""
+    batch = median_seconds({"neforward batched": ours, "pinocchio loop": peer}, max(3, repeats // 2))
+    print(f"\n{samples} samples:")
+    for name, seconds in batch.items():
+        print(f"  {name:<22} {seconds * 1e3:8.1f} ms  ({seconds / samples * 1e6:.2f} us per sample)")
+    ratio = batch["pinocchio loop"] / batch["neforward batched"]
+    print(f"  throughput ratio neforward batched / pinocchio loop: {ratio:.1f}x  (target >= {target:g})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=10_000, help="batch size (default 10000)")
@@ -95,18 +108,13 @@ def main() -> None:
     print(f"  ratio pinocchio fill / neforward:       {ratio_single:.2f}x  (target >= 1)")
     print(f"  ratio pinocchio calls only / neforward: {ratio_floor:.2f}x  (reference)")
 
-    batch = median_seconds(
-        {
-            "neforward batched": lambda: forward_recursion(model, q, qd, qdd, gravity=GRAVITY),
-            "pinocchio fill loop": lambda: [peer.fill(links, *x) for x in pin_inputs],
-        },
-        max(3, args.repeats // 2),
+    compare_batches(
+        lambda: forward_recursion(model, q, qd, qdd, gravity=GRAVITY),
+        lambda: [peer.fill(links, *x) for x in pin_inputs],
+        args.samples,
+        args.repeats,
+        25,
     )
-    print(f"\n{args.samples} samples:")
-    for name, seconds in batch.items():
-        print(f"  {name:<22} {seconds * 1e3:8.1f} ms  ({seconds / args.samples * 1e6:.2f} us per sample)")
-    ratio_batch = batch["pinocchio fill loop"] / batch["neforward batched"]
-    print(f"  throughput ratio neforward batched / pinocchio loop: {ratio_batch:.1f}x  (target >= 25)")
 
 
 if __name__ == "__main__":

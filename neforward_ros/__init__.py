@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any
 _EXPORTS = {
     "DEFAULT_GRAVITY": "neforward_ros.recursion",
     "InputError": "neforward_ros.errors",
+    "InverseDynamics": "neforward_ros.dynamics",
     "JointEstimate": "neforward_ros.estimation.stream",
     "JointKind": "neforward_ros.model",
     "LinkKinematics": "neforward_ros.recursion",
@@ -24,12 +25,14 @@ _EXPORTS = {
     "StreamingEstimator": "neforward_ros.estimation.stream",
     "estimate_derivatives": "neforward_ros.estimation.batch",
     "forward_recursion": "neforward_ros.recursion",
+    "inverse_dynamics": "neforward_ros.dynamics",
     "load_model": "neforward_ros.model",
 }
 
 __all__ = [
     "DEFAULT_GRAVITY",
     "InputError",
+    "InverseDynamics",
     "JointEstimate",
     "JointKind",
     "LinkKinematics",
@@ -41,10 +44,12 @@ __all__ = [
     "StreamingEstimator",
     "estimate_derivatives",
     "forward_recursion",
+    "inverse_dynamics",
     "load_model",
 ]
 
 if TYPE_CHECKING:
+    from neforward_ros.dynamics import InverseDynamics, inverse_dynamics
     from neforward_ros.errors import InputError, ModelError, NeforwardError
     from neforward_ros.estimation.batch import estimate_derivatives
     from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator, StreamSettings

@@ -80,20 +80,44 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="JOINT=POSITION",
         help="with --publish-policy hold: a joint's held position (others 0); repeat for more joints",
     )
+    bag.add_argument(
+        "--torques",
+        action="store_true",
+        help="also write joint_torques (the model's) and external_torques (recorded effort - model)",
+    )
+    bag.add_argument("--wrench-links", default="", help="comma-separated links that also get a wrench topic")
+    bag.add_argument(
+        "--effort",
+        action="append",
+        default=[],
+        metavar="JOINT=SCALE[,OFFSET]",
+        help="measured effort = SCALE * recorded effort + OFFSET for a joint; repeat for more joints",
+    )
+    bag.add_argument(
+        "--contact",
+        action="append",
+        default=[],
+        metavar="JOINT=THRESHOLD",
+        help="write contact (std_msgs/Bool): a joint's |external torque| threshold; repeat for more joints",
+    )
+    bag.add_argument("--contact-debounce", type=float, default=0.02, help="s (default 0.02)")
     return parser
 
 
-def _hold_positions(items: Sequence[str]) -> dict[str, float]:
-    positions = {}
+def _per_joint(items: Sequence[str], option: str, width: int = 1) -> dict[str, list[float]]:
+    """JOINT=V (or V,W with width 2) items as joint -> numbers."""
+    out = {}
     for item in items:
         name, _, value = item.partition("=")
         try:
-            positions[name.strip()] = float(value)
+            numbers = [float(v) for v in value.split(",")]
         except ValueError:
-            raise NeforwardError(f"--hold takes JOINT=POSITION (a number), got {item!r}") from None
-        if not name.strip():
-            raise NeforwardError(f"--hold takes JOINT=POSITION, got {item!r}")
-    return positions
+            numbers = []
+        if not name.strip() or not 1 <= len(numbers) <= width:
+            shape = "JOINT=NUMBER" if width == 1 else "JOINT=NUMBER[,NUMBER]"
+            raise NeforwardError(f"{option} takes {shape}, got {item!r}")
+        out[name.strip()] = numbers
+    return out
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -125,6 +149,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         elif args.command == "bag":
             from neforward_ros.bag import BagOptions, Progress, describe, process_bag
 
+            efforts = _per_joint(args.effort, "--effort", width=2)
             options = BagOptions(
                 urdf=args.urdf,
                 joint_states_topic=args.joint_states,
@@ -133,7 +158,13 @@ def main(argv: Sequence[str] | None = None) -> int:
                 imu_links=tuple(filter(None, args.imu_links.split(","))),
                 gravity=tuple(args.gravity) if args.gravity else DEFAULT_GRAVITY,
                 publish_policy=args.publish_policy,
-                hold_positions=_hold_positions(args.hold),
+                hold_positions={k: v[0] for k, v in _per_joint(args.hold, "--hold").items()},
+                publish_torques=args.torques,
+                wrench_links=tuple(filter(None, args.wrench_links.split(","))),
+                effort_scale={k: v[0] for k, v in efforts.items()},
+                effort_offset={k: v[1] if len(v) > 1 else 0.0 for k, v in efforts.items()},
+                contact_thresholds={k: v[0] for k, v in _per_joint(args.contact, "--contact").items()},
+                contact_debounce=args.contact_debounce,
             )
             report = process_bag(
                 args.input, args.output, options, csv_path=args.csv, plot_path=args.plot, progress=Progress()

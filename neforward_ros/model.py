@@ -96,6 +96,12 @@ class RobotModel:
         com_in_link: for each link, its centre of mass in its own frame (m); the link origin
             when the URDF gives no ``<inertial>``.
         link_index, joint_index: name -> index in ``link_names`` / ``joint_names``.
+        mass: for each link, kg (0 without ``<inertial>``: a massless link).
+        inertia_in_link: for each link, its inertia tensor about its centre of mass, along the link
+            frame's axes (the URDF's ``<inertia>`` rotated by the ``<inertial><origin>`` rpy), kg m^2,
+            row-major.
+        inertia_warnings: inertias that no rigid body can have but that are used as given (principal
+            moments violating the triangle inequality), one message per link.
     """
 
     name: str
@@ -105,6 +111,9 @@ class RobotModel:
     com_in_link: tuple[Vec3, ...]
     link_index: Mapping[str, int]
     joint_index: Mapping[str, int]
+    mass: tuple[float, ...] = ()
+    inertia_in_link: tuple[Mat3, ...] = ()
+    inertia_warnings: tuple[str, ...] = ()
 
     @property
     def root_link(self) -> str:
@@ -293,6 +302,8 @@ def _build_model(robot, root_link: str | None) -> RobotModel:
         parent_joints.append(_parent_joint(joint, link_index[joint.parent], joint_by_name, joint_index, in_tree))
 
     com_in_link = tuple(_com(link_by_name[name]) for name in link_names)
+    inertias = [_inertia(link_by_name[name]) for name in link_names]
+    warnings = tuple(warning for _, _, warning in inertias if warning)
     return RobotModel(
         name=robot.name or "",
         link_names=tuple(link_names),
@@ -301,6 +312,9 @@ def _build_model(robot, root_link: str | None) -> RobotModel:
         com_in_link=com_in_link,
         link_index=MappingProxyType(link_index),
         joint_index=MappingProxyType(joint_index),
+        mass=tuple(mass for mass, _, _ in inertias),
+        inertia_in_link=tuple(inertia for _, inertia, _ in inertias),
+        inertia_warnings=warnings,
     )
 
 
@@ -407,6 +421,48 @@ def _com(link) -> Vec3:
     return _vec3(xyz)
 
 
+INERTIA_TOLERANCE = 1e-9
+"""Relative slack of the inertia checks (of the largest principal moment): rounding in a URDF's numbers."""
+
+
+def _inertia(link) -> tuple[float, Mat3, str]:
+    """(mass, inertia about the centre of mass along the link axes, a warning or ""), checked.
+
+    Raises:
+        ModelError: a mass that is negative or not a number, an inertia with a non-finite entry or
+            a negative principal moment (not positive semi-definite), naming the link.
+    """
+    inertial = link.inertial
+    if inertial is None:
+        return 0.0, (0.0,) * 9, ""  # type: ignore[return-value]
+    mass = 0.0 if inertial.mass is None else float(inertial.mass)
+    if not (math.isfinite(mass) and mass >= 0.0):
+        raise ModelError(f"link {link.name!r} has mass {mass!r}: a mass must be a number of at least 0")
+    inertia = np.zeros((3, 3)) if inertial.inertia is None else np.asarray(inertial.inertia, dtype=float)
+    if inertia.shape != (3, 3) or not np.all(np.isfinite(inertia)):
+        raise ModelError(f"link {link.name!r} has a non-finite <inertia>")
+    inertia = 0.5 * (inertia + inertia.T)
+    if inertial.origin is not None:
+        rotation = np.asarray(inertial.origin, dtype=float)[:3, :3]
+        inertia = rotation @ inertia @ rotation.T
+    moments = np.linalg.eigvalsh(inertia)
+    slack = INERTIA_TOLERANCE * max(float(np.abs(moments).max()), 1e-300)
+    if moments[0] < -slack:
+        raise ModelError(
+            f"link {link.name!r} has an inertia with a negative principal moment ({moments[0]:.6g} kg m^2): "
+            "no body has one; check its <inertia> (ixx ixy ixz iyy iyz izz)"
+        )
+    warning = ""
+    if moments[0] + moments[1] < moments[2] - slack:
+        shortfall = (moments[2] - moments[0] - moments[1]) / moments[2]
+        warning = (
+            f"link {link.name!r}: the principal moments of its inertia ({', '.join(f'{m:.6g}' for m in moments)} "
+            f"kg m^2) break the triangle inequality (the two smaller sum to {100 * shortfall:.3g} % less than the "
+            "largest): no rigid body has this inertia; it is used as given"
+        )
+    return mass, _mat3(inertia), warning
+
+
 def _vec3(values: np.ndarray) -> Vec3:
     x, y, z = (float(v) for v in values)
     return (x, y, z)
@@ -423,6 +479,9 @@ def _contents(model: RobotModel) -> dict:
         "link_names": list(model.link_names),
         "joint_names": list(model.joint_names),
         "com_in_link": [list(c) for c in model.com_in_link],
+        "mass": list(model.mass),
+        "inertia_in_link": [list(i) for i in model.inertia_in_link],
+        "inertia_warnings": list(model.inertia_warnings),
         "parent_joints": [
             None if j is None else {**{f: getattr(j, f) for f in ParentJoint.__slots__}, "kind": j.kind.value}
             for j in model.parent_joints
@@ -451,4 +510,7 @@ def _from_contents(contents: dict) -> RobotModel:
         com_in_link=tuple(tuple(c) for c in contents["com_in_link"]),
         link_index=MappingProxyType({name: i for i, name in enumerate(link_names)}),
         joint_index=MappingProxyType({name: i for i, name in enumerate(joint_names)}),
+        mass=tuple(contents["mass"]),
+        inertia_in_link=tuple(tuple(i) for i in contents["inertia_in_link"]),
+        inertia_warnings=tuple(contents["inertia_warnings"]),
     )

@@ -129,14 +129,14 @@ def forward_recursion(
     Raises:
         InputError: shapes that do not match the model or each other, or NaN/inf values.
     """
-    q, qd, qdd = _check_joint_arrays(model, q, qd, qdd)
-    gx, gy, gz = _check_gravity(gravity)
+    q, qd, qdd = check_joint_arrays(model, q, qd, qdd)
+    gx, gy, gz = check_gravity(gravity)
     if q.ndim == 1:
         columns = q.tolist(), qd.tolist(), qdd.tolist()
         if not np.isfinite(sum(columns[0]) + sum(columns[1]) + sum(columns[2])):
-            _check_finite(model, q, qd, qdd)  # names the culprit; a sum can also overflow
+            check_finite(model, q, qd, qdd)  # names the culprit; a sum can also overflow
     else:
-        _check_finite(model, q, qd, qdd)
+        check_finite(model, q, qd, qdd)
     table = kinematics_table(model, q, qd, qdd, root_state(gravity=(gx, gy, gz)))
     return LinkKinematics.from_table(model.link_names, table)
 
@@ -144,6 +144,14 @@ def forward_recursion(
 def root_state(gravity: Sequence[float] = DEFAULT_GRAVITY) -> tuple[float, ...]:
     """The root's (omega, alpha, v, a) for a fixed base: at rest, with a_0 = -g, the specific force
     an accelerometer on the base reads."""
+    if isinstance(gravity, tuple):
+        return _root_state(gravity)
+    gx, gy, gz = gravity
+    return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -gx, -gy, -gz)
+
+
+@functools.lru_cache(maxsize=8)
+def _root_state(gravity: tuple[float, ...]) -> tuple[float, ...]:
     gx, gy, gz = gravity
     return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -gx, -gy, -gz)
 
@@ -161,7 +169,7 @@ def kinematics_table(
     if q.ndim == 1:
         values = kernel(q.tolist(), qd.tolist(), qdd.tolist(), root, math.sin, math.cos)
         # struct packs a tuple of floats several times faster than np.array converts it.
-        packer = _packer(len(values))
+        packer = packer_of(len(values))
         buffer = bytearray(packer.size)
         packer.pack_into(buffer, 0, *values)
         return np.frombuffer(buffer, dtype=float).reshape(n_links, ROW)
@@ -180,11 +188,13 @@ def kinematics_table(
 
 
 @functools.lru_cache(maxsize=16)
-def _packer(count: int) -> struct.Struct:
+def packer_of(count: int) -> struct.Struct:
+    """A struct packing ``count`` doubles (kept for the last few counts)."""
     return struct.Struct(f"{count}d")
 
 
-def _check_joint_arrays(model: RobotModel, q: Any, qd: Any, qdd: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def check_joint_arrays(model: RobotModel, q: Any, qd: Any, qdd: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """q, qd, qdd as float arrays of the model's width and one shape; InputError otherwise."""
     n = len(model.joint_names)
     arrays = []
     for name, values in (("q", q), ("qd", qd), ("qdd", qdd)):
@@ -204,7 +214,8 @@ def _check_joint_arrays(model: RobotModel, q: Any, qd: Any, qdd: Any) -> tuple[n
     return arrays[0], arrays[1], arrays[2]
 
 
-def _check_finite(model: RobotModel, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
+def check_finite(model: RobotModel, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> None:
+    """InputError naming the first non-finite value's array, sample and joint."""
     for name, values in (("q", q), ("qd", qd), ("qdd", qdd)):
         bad = ~np.isfinite(values)
         if bad.any():
@@ -214,11 +225,15 @@ def _check_finite(model: RobotModel, q: np.ndarray, qd: np.ndarray, qdd: np.ndar
             raise InputError(f"{name} has a non-finite value ({values[index]}) at {where}joint {joint!r}")
 
 
-def _check_gravity(gravity: Sequence[float]) -> tuple[float, float, float]:
+def check_gravity(gravity: Sequence[float]) -> tuple[float, float, float]:
+    """gravity as three finite floats; InputError otherwise."""
+
     # Plain Python: this runs for every single sample, where numpy calls would dominate.
     def problem() -> InputError:  # built only on error: repr of an array costs tens of microseconds
         return InputError(f"gravity must be a finite 3-vector in the root frame (m/s^2), got {gravity!r}")
 
+    if gravity is DEFAULT_GRAVITY:
+        return DEFAULT_GRAVITY
     if isinstance(gravity, (str, bytes)) or (isinstance(gravity, np.ndarray) and gravity.shape != (3,)):
         raise problem()
     try:

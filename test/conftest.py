@@ -20,6 +20,7 @@ TEST_ROBOTS = {
     "mimic": URDF_DIR / "mimic.urdf",
     "fixed_between": URDF_DIR / "fixed_between.urdf",
     "humanoid": URDF_DIR / "humanoid.urdf",
+    "inertias": URDF_DIR / "inertias.urdf",
     "panda": CONFIG_DIR / "panda.urdf",
 }
 
@@ -41,6 +42,8 @@ REQUIREMENTS = {
     "test_dds_node.py": ("cyclonedds", "rosbags"),
     "test_demo.py": ("cyclonedds",),
     "test_derivatives_stream.py": ("hypothesis",),
+    "test_dynamics.py": ("pinocchio", "scipy"),
+    "test_torques.py": ("pinocchio",),
     "test_pipeline_messages.py": ("scipy", "rosbags", "pinocchio"),
     "test_recursion_pinocchio.py": ("pinocchio",),
 }

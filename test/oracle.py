@@ -16,6 +16,19 @@ import pinocchio as pin  # test modules that use this one are skipped without it
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
 
+def unfixed_urdf(path: Path) -> str:
+    """The URDF with every fixed joint made a revolute one (kept at 0 by the callers): Pinocchio merges
+    the links of fixed joints into their parent's body, and a joint of its own for each link gives
+    the wrench through every joint (``data.f``) and an external force on every link."""
+    root = ElementTree.parse(path).getroot()
+    for joint in root.iter("joint"):
+        if joint.get("type") == "fixed":
+            joint.set("type", "revolute")
+            ElementTree.SubElement(joint, "axis", {"xyz": "0 0 1"})
+            ElementTree.SubElement(joint, "limit", {"lower": "-1", "upper": "1", "effort": "1", "velocity": "1"})
+    return ElementTree.tostring(root, encoding="unicode")
+
+
 def com_offsets_from_xml(path: Path) -> dict[str, np.ndarray]:
     offsets = {}
     for link in ElementTree.parse(path).getroot().iter("link"):
@@ -26,8 +39,11 @@ def com_offsets_from_xml(path: Path) -> dict[str, np.ndarray]:
 
 
 class PinocchioOracle:
-    def __init__(self, path: Path) -> None:
-        self.model = pin.buildModelFromXML(path.read_text(), mimic=True)
+    """Pinocchio's model of a URDF; ``unfix``: with every fixed joint made a joint (see unfixed_urdf);
+    ``mimic=False``: mimic joints as independent joints."""
+
+    def __init__(self, path: Path, unfix: bool = False, mimic: bool = True) -> None:
+        self.model = pin.buildModelFromXML(unfixed_urdf(path) if unfix else path.read_text(), mimic=mimic)
         coms = com_offsets_from_xml(path)
         self.link_frames: dict[str, tuple[int, int]] = {}
         for link, com in coms.items():
@@ -109,3 +125,15 @@ class PinocchioOracle:
             [pin.getFrameVelocity(model, data, self.link_frames[link][1], local).linear for link in link_names]
         )
         return out
+
+    def link_joints(self, parent_joint_names: list[str | None]) -> list[int]:
+        """Pinocchio's joint id for each link's parent joint (0, the universe, for the root); needs unfix."""
+        return [0 if name is None else self.model.getJointId(name) for name in parent_joint_names]
+
+    def rnea_fill(self, joint_ids: list[int], qp, vp, ap, fext=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """pin.rnea, and per link the wrench through its joint (data.f), as an efficient Pinocchio user
+        collects them: (tau, force (n_links, 3), moment (n_links, 3)). The root's is left zero."""
+        model, data = self.model, self.data
+        tau = pin.rnea(model, data, qp, vp, ap) if fext is None else pin.rnea(model, data, qp, vp, ap, fext)
+        f = data.f
+        return tau, np.array([f[i].linear for i in joint_ids]), np.array([f[i].angular for i in joint_ids])

@@ -5,19 +5,22 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.read import Recording
 from neforward_ros.bag.report import Segment
+from neforward_ros.dynamics import split_values, wrenches_from_table
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.coverage import covered_mask
 from neforward_ros.estimation.stream import StreamSettings
+from neforward_ros.logs import ThrottledLog
 from neforward_ros.model import RobotModel
+from neforward_ros.node.contact import ContactDetector
 from neforward_ros.node.policy import apply_policy, hold_vector
-from neforward_ros.node.result import Result, make_result
+from neforward_ros.node.result import Dynamics, Result, make_result
 from neforward_ros.recursion import kinematics_table, root_state
 from neforward_ros.stamps import NS
 
@@ -33,6 +36,8 @@ class States:
         stamps: (T,) the samples' stamps, integer ns; log_times: (T,) their recording times.
         q, qd, qdd: (T, n) in the model's joint order; zeros where a joint has nothing.
         known: (T, n) whether each joint's state is an estimate (or held, under ``hold``).
+        efforts: (T, n) the recorded efforts at each stamp (interpolated between a joint's samples),
+            NaN where there are none.
     """
 
     stamps: np.ndarray
@@ -41,29 +46,53 @@ class States:
     qd: np.ndarray
     qdd: np.ndarray
     known: np.ndarray
+    efforts: np.ndarray
 
     def __len__(self) -> int:
         return len(self.stamps)
 
 
 def results(
-    model: RobotModel, states: States, gravity: tuple[float, float, float], chunk: int | None = None
+    model: RobotModel, states: States, options: BagOptions, chunk: int | None = None
 ) -> Iterator[tuple[Result, np.ndarray]]:
-    """(result, recording times) of consecutive chunks of the samples, each from one batched recursion."""
-    root = root_state(gravity)
+    """(result, recording times) of consecutive chunks of the samples, each from one batched recursion
+    (and, when the options ask for torques, wrenches or contact, one batched backward pass)."""
+    root = root_state(options.gravity)
     chunk = CHUNK if chunk is None else chunk
+    scale = np.array([options.effort_scale.get(n, 1.0) for n in model.joint_names])
+    offset = np.array([options.effort_offset.get(n, 0.0) for n in model.joint_names])
+    detector = None
+    if options.contact_thresholds:
+        thresholds = np.array([options.contact_thresholds.get(n, np.nan) for n in model.joint_names])
+        detector = ContactDetector(thresholds, options.contact_debounce, model.joint_names, ThrottledLog())
     for start in range(0, len(states), chunk):
         part = slice(start, start + chunk)
-        table = kinematics_table(model, states.q[part], states.qd[part], states.qdd[part], root)
-        determined = model.determined_links(states.known[part])
-        yield make_result(model, states.stamps[part], table, determined), states.log_times[part]
+        q = states.q[part]
+        table = kinematics_table(model, q, states.qd[part], states.qdd[part], root)
+        known = states.known[part]
+        result = make_result(model, states.stamps[part], table, model.determined_links(known))
+        if options.dynamics_needed:
+            force, moment, torques = split_values(model, wrenches_from_table(model, q, table))
+            complete = known.all(axis=1)
+            torques = np.where(complete[:, None], torques, np.nan)  # no dynamics where a joint has no state
+            measured = scale * states.efforts[part] + offset
+            dynamics = Dynamics(model.joint_names, q, states.qd[part], torques, measured, force, moment)
+            contact = None
+            if detector is not None:
+                external = dynamics.external
+                contact = np.full(len(q), np.nan)
+                for i in np.flatnonzero(complete):
+                    state = detector.update(int(states.stamps[part][i]), external[i])
+                    contact[i] = np.nan if state is None else float(state)
+            result = replace(result, dynamics=dynamics, contact=contact)
+        yield result, states.log_times[part]
 
 
 def _segments(recording: Recording) -> list[tuple[int, int]]:
     """Message index ranges [start, stop) within which every joint's stamps increase."""
     stamps = recording.stamps
     breaks = set()
-    for rows, _, _ in recording.columns.values():
+    for rows, _, _, _ in recording.columns.values():
         joint_stamps = stamps[rows]
         backwards = np.nonzero(np.diff(joint_stamps) < 0)[0]
         breaks.update(int(rows[k + 1]) for k in backwards)
@@ -95,6 +124,7 @@ def estimate_states(recording: Recording, options: BagOptions, progress: Callabl
         origin = int(targets[0])
         target_s = (targets - origin) / NS
         state = np.full((3, len(targets), n), np.nan)
+        efforts = np.full((len(targets), n), np.nan)
         # As the node, which emits an estimate once a message about `after` later arrives (half an
         # interval early, for jitter) and has none for the last stretch of a stream.
         early = 0.5 * float(np.median(np.diff(target_s))) if len(target_s) > 1 else 0.0
@@ -103,9 +133,10 @@ def estimate_states(recording: Recording, options: BagOptions, progress: Callabl
         # Each joint's own samples; joints with the same sample times and kind are estimated together.
         groups: dict[tuple[bytes, bool], list[tuple[int, np.ndarray, np.ndarray]]] = {}
         absent = []
-        for j, (rows, qs, vs) in recording.columns.items():
+        for j, (rows, qs, vs, es) in recording.columns.items():
             inside = (rows >= start) & (rows < stop) & np.isfinite(qs)
             t_ns, keep = np.unique(recording.stamps[rows[inside]], return_index=True)
+            efforts[:, j] = _efforts_at(t_ns, es[inside][keep], targets)
             if len(t_ns) < support.min_samples:
                 absent.append(model.joint_names[j])
                 continue
@@ -151,14 +182,25 @@ def estimate_states(recording: Recording, options: BagOptions, progress: Callabl
                 published.qd[ok],
                 published.qdd[ok],
                 published.known[ok],
+                efforts[ok],
             )
         )
     progress("estimating", 1.0)
     if not pieces:
         stamps = np.zeros(0, dtype=np.int64)
         zeros = np.zeros((0, n))
-        pieces = [(stamps, stamps, zeros, zeros, zeros, zeros.astype(bool))]
+        pieces = [(stamps, stamps, zeros, zeros, zeros, zeros.astype(bool), zeros)]
     return States(*(np.concatenate(parts) for parts in zip(*pieces, strict=True)))
+
+
+def _efforts_at(t_ns: np.ndarray, efforts: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """A joint's recorded efforts at the target stamps: a sample's own at its stamp, else interpolated
+    between the samples around; NaN outside them and next to samples without one."""
+    if len(t_ns) == 0 or not np.isfinite(efforts).any():
+        return np.full(len(targets), np.nan)
+    out = np.interp(targets, t_ns, efforts)  # NaN samples make their neighbourhood NaN
+    out[(targets < t_ns[0]) | (targets > t_ns[-1])] = np.nan
+    return out
 
 
 def _end_slack(t: np.ndarray) -> float:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from neforward_ros.model import RobotModel
+from neforward_ros.model import JointKind, RobotModel
 from neforward_ros.node.result import Result
 from neforward_ros.stamps import NS
 
@@ -18,9 +18,18 @@ CSV_FIELDS = (
 )
 
 
+def torque_unit(model: RobotModel, joint: int) -> str:
+    """N*m for a rotating joint, N for a prismatic one."""
+    for parent in model.parent_joints:
+        if parent is not None and parent.mimic_of is None and parent.q_index == joint:
+            return "N" if parent.kind is JointKind.PRISMATIC else "N*m"
+    return "N*m"
+
+
 class CsvWriter:
     """One row per sample, written a chunk of results at a time: stamp, then per link omega, alpha,
-    accel and com_accel (x, y, z).
+    accel and com_accel (x, y, z); with ``torques``, per joint its torque (the model's) and, with
+    ``external``, measured effort minus it (``<joint>.torque[N*m]``, ``<joint>.external_torque[N*m]``).
 
     The header names each column's link, quantity, frame, component and unit, e.g.
     ``panda_hand.accel_in_root.z[m/s^2]``: vectors along the root frame's axes. accel and com_accel
@@ -28,14 +37,20 @@ class CsvWriter:
     A link that a joint without an estimate moves has empty cells (NaN) at that sample.
     """
 
-    def __init__(self, path: Path, model: RobotModel) -> None:
+    def __init__(self, path: Path, model: RobotModel, torques: bool = False, external: bool = False) -> None:
         self.model = model
+        self.torques, self.external = torques, external
         self.stream = path.open("w")
         self.origin: int | None = None
         names = ["stamp_ns", "t[s]"]
         for link in model.link_names:
             for quantity, unit, frame in CSV_FIELDS:
                 names += [f"{link}.{quantity}_in_{frame}.{axis}[{unit}]" for axis in "xyz"]
+        units = [torque_unit(model, j) for j in range(len(model.joint_names))]
+        if torques:
+            names += [f"{joint}.torque[{unit}]" for joint, unit in zip(model.joint_names, units, strict=True)]
+        if external:
+            names += [f"{joint}.external_torque[{unit}]" for joint, unit in zip(model.joint_names, units, strict=True)]
         self.stream.write(",".join(names) + "\n")
 
     def write(self, result: Result) -> None:
@@ -54,6 +69,15 @@ class CsvWriter:
                 for link_index in range(len(self.model.link_names))
                 for block in blocks[link_index * len(CSV_FIELDS) : (link_index + 1) * len(CSV_FIELDS)]
             ]
+        if self.torques or self.external:
+            dynamics = result.dynamics
+            count = len(stamps)
+            width = len(self.model.joint_names)
+            nothing = np.full((count, width), np.nan)
+            if self.torques:
+                blocks.append(nothing if dynamics is None else dynamics.torques)
+            if self.external:
+                blocks.append(nothing if dynamics is None else dynamics.external)
         values = np.concatenate([((stamps - self.origin) / NS)[:, None], *blocks], axis=1)
         text = np.char.mod("%.9g", values)
         self.stream.writelines(
@@ -66,13 +90,16 @@ class CsvWriter:
 
 class PlotSeries:
     """What the plot shows, gathered chunk by chunk: every link's |a| (kinematic: gravity removed)
-    and |alpha| at every sample."""
+    and |alpha| at every sample, and with ``torques`` every joint's torque and external torque."""
 
-    def __init__(self, gravity: tuple[float, float, float]) -> None:
+    def __init__(self, gravity: tuple[float, float, float], torques: bool = False) -> None:
         self.gravity = np.asarray(gravity, dtype=float)
+        self.with_torques = torques
         self.stamps: list[np.ndarray] = []
         self.accel: list[np.ndarray] = []
         self.alpha: list[np.ndarray] = []
+        self.torques: list[np.ndarray] = []
+        self.external: list[np.ndarray] = []
 
     def add(self, result: Result) -> None:
         root = result.in_root
@@ -83,10 +110,14 @@ class PlotSeries:
             accel, alpha = (np.where(result.determined, x, np.nan) for x in (accel, alpha))
         self.accel.append(accel)
         self.alpha.append(alpha)
+        if self.with_torques and result.dynamics is not None:
+            self.torques.append(result.dynamics.torques)
+            self.external.append(result.dynamics.external)
 
 
 def write_plot(path: Path, series: PlotSeries, model: RobotModel) -> None:
-    """PNG: every link's |a| (kinematic, gravity removed) and |alpha| over time, peaks marked and labelled."""
+    """PNG: every link's |a| (kinematic, gravity removed) and |alpha| over time, peaks marked and
+    labelled; with torques, every joint's torque and, where efforts were recorded, external torque."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -95,7 +126,14 @@ def write_plot(path: Path, series: PlotSeries, model: RobotModel) -> None:
     stamps = np.concatenate(series.stamps)
     t = (stamps - stamps[0]) / NS
     accel, alpha = np.concatenate(series.accel), np.concatenate(series.alpha)
-    figure, axes = plt.subplots(2, 1, figsize=(13, 8), sharex=True)
+    torque_panels = []
+    if series.torques:
+        torque_panels.append((np.concatenate(series.torques), "joint torque [N*m, N]"))
+        external = np.concatenate(series.external)
+        if np.isfinite(external).any():
+            torque_panels.append((external, "external torque [N*m, N]\n(measured - model)"))
+    rows = 2 + len(torque_panels)
+    figure, axes = plt.subplots(rows, 1, figsize=(13, 4 * rows), sharex=True)
     for axis, values, label in ((axes[0], accel, "|a| [m/s^2]"), (axes[1], alpha, "|alpha| [rad/s^2]")):
         axis.set_prop_cycle(color=plt.cm.tab20.colors)  # tens of links: more colours than the default 10
         for k, link in enumerate(model.link_names):
@@ -132,8 +170,16 @@ def write_plot(path: Path, series: PlotSeries, model: RobotModel) -> None:
             labelled.append((value, t[peak]))
         axis.set_ylabel(label)
         axis.grid(True, alpha=0.3)
+    for axis, (values, label) in zip(axes[2:], torque_panels, strict=True):
+        axis.set_prop_cycle(color=plt.cm.tab20.colors)
+        for j, joint in enumerate(model.joint_names):
+            if np.isfinite(values[:, j]).any():
+                axis.plot(t, values[:, j], linewidth=0.8, label=joint)
+        axis.set_ylabel(label)
+        axis.grid(True, alpha=0.3)
+        axis.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     axes[0].set_title(f"{model.name}: link accelerations (peaks marked)")
-    axes[1].set_xlabel("time since first sample [s]")
+    axes[-1].set_xlabel("time since the first output [s]")
     axes[0].legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     figure.tight_layout()
     figure.savefig(path, format="png", dpi=100)

@@ -32,6 +32,11 @@ class BagOptions:
             every joint above which has one, ``wait`` writes nothing, ``hold`` holds joints with no
             sample within max_gap (or none at all) at ``hold_positions`` (others 0), at rest.
         hold_positions: joint name -> position, for ``hold``.
+        publish_torques: write joint_torques and (where efforts are recorded) external_torques.
+        wrench_links: links that also get a <link>/wrench topic.
+        effort_scale, effort_offset: joint name -> measured = scale * effort + offset.
+        contact_thresholds: joint name -> |external torque| threshold: writes contact.
+        contact_debounce: s.
     """
 
     urdf: str | None = None
@@ -48,6 +53,16 @@ class BagOptions:
     frame_prefix: str = ""
     publish_policy: str = "partial"
     hold_positions: Mapping[str, float] = field(default_factory=dict)
+    publish_torques: bool = False
+    wrench_links: tuple[str, ...] = ()
+    effort_scale: Mapping[str, float] = field(default_factory=dict)
+    effort_offset: Mapping[str, float] = field(default_factory=dict)
+    contact_thresholds: Mapping[str, float] = field(default_factory=dict)
+    contact_debounce: float = 0.02
+
+    @property
+    def dynamics_needed(self) -> bool:
+        return bool(self.publish_torques or self.wrench_links or self.contact_thresholds)
 
 
 def check_options(options: BagOptions) -> None:

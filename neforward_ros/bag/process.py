@@ -8,6 +8,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
+
 from neforward_ros.bag.compute import estimate_states, results
 from neforward_ros.bag.export import CsvWriter, PlotSeries, write_plot
 from neforward_ros.bag.options import BagOptions, check_options
@@ -54,9 +56,17 @@ def process_bag(
     for link in (*options.accel_links, *options.imu_links):
         if link not in model.link_index:
             raise InputError(f"link {link!r} is not in robot {model.name!r}")
-    unknown = [name for name in options.hold_positions if name not in model.joint_index]
-    if unknown:
-        raise InputError(f"--hold names joints that robot {model.name!r} does not have: {', '.join(unknown)}")
+    for option, names in (
+        ("--hold", options.hold_positions),
+        ("--effort", options.effort_scale),
+        ("--contact", options.contact_thresholds),
+    ):
+        unknown = [name for name in names if name not in model.joint_index]
+        if unknown:
+            raise InputError(f"{option} names joints that robot {model.name!r} does not have: {', '.join(unknown)}")
+    for link in options.wrench_links:
+        if link not in model.link_index:
+            raise InputError(f"link {link!r} is not in robot {model.name!r}")
     states = estimate_states(recording, options, progress)
     report = recording.report
     report.samples_out = len(states)
@@ -73,10 +83,21 @@ def process_bag(
         csv = None
         if csv_path is not None:
             partials.append(_partial(Path(csv_path)))
-            csv = CsvWriter(partials[-1], model)
-        series = PlotSeries(options.gravity) if plot_path is not None else None
+            measured = bool(np.isfinite(states.efforts).any())
+            csv = CsvWriter(partials[-1], model, options.publish_torques, options.publish_torques and measured)
+        series = PlotSeries(options.gravity, options.publish_torques) if plot_path is not None else None
         written = 0
-        for result, log_times in results(model, states, options.gravity):
+        contact_state, origin = False, report.segments[0].first_ns
+        for result, log_times in results(model, states, options):
+            if result.contact is not None:  # the contact intervals, for the report
+                for stamp, state in zip(result.stamp_ns.tolist(), result.contact.tolist(), strict=True):
+                    if state == state and bool(state) != contact_state:  # a known state that changed
+                        contact_state = bool(state)
+                        seconds = (stamp - origin) / 1e9
+                        if contact_state:
+                            report.contacts.append((seconds, None))
+                        else:
+                            report.contacts[-1] = (report.contacts[-1][0], seconds)
             recording_writer.write(result, log_times)
             if csv is not None:
                 csv.write(result)

@@ -23,7 +23,7 @@ class Recording:
     report: BagReport
     stamps: np.ndarray  # (M,) int64 ns, per message
     log_times: np.ndarray  # (M,) int64 ns
-    columns: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]  # joint -> (message index, q, v)
+    columns: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]  # joint -> (message index, q, v, effort)
 
 
 def read(source: Path, options: BagOptions, progress: Callable[[str, float], None]) -> Recording:
@@ -81,13 +81,14 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
 
 def _columns(
     model: RobotModel, decoded: cdr.JointStateBatch, renumber: np.ndarray
-) -> tuple[dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]], set[str]]:
-    """Per model joint: (message indices, positions, velocities or NaN), from messages grouped by names."""
+) -> tuple[dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]], set[str]]:
+    """Per model joint: (message indices, positions, velocities or NaN, efforts or NaN), from messages
+    grouped by names."""
     known = model.joint_index
     ignored = set(model.mimic_joint_names)
-    parts: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
+    parts: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = {}
     unknown: set[str] = set()
-    for names, (indices, positions, velocities, _) in decoded.groups.items():
+    for names, (indices, positions, velocities, efforts) in decoded.groups.items():
         rows = renumber[indices]
         for k, name in enumerate(names):
             j = known.get(name)
@@ -95,12 +96,12 @@ def _columns(
                 if name not in ignored:
                     unknown.add(name)
                 continue
-            parts.setdefault(j, []).append((rows, positions[:, k], velocities[:, k]))
+            parts.setdefault(j, []).append((rows, positions[:, k], velocities[:, k], efforts[:, k]))
     columns = {}
     for j, pieces in parts.items():
-        rows, qs, vs = (np.concatenate(x) for x in zip(*pieces, strict=True))
+        rows, qs, vs, es = (np.concatenate(x) for x in zip(*pieces, strict=True))
         order = np.argsort(rows, kind="stable")
-        columns[j] = (rows[order], qs[order], vs[order])
+        columns[j] = (rows[order], qs[order], vs[order], es[order])
     return columns, unknown
 
 

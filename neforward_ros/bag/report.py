@@ -33,6 +33,7 @@ class BagReport:
     zero_stamps: int = 0
     ignored_names: list[str] = field(default_factory=list)
     missing_joints: list[str] = field(default_factory=list)
+    contacts: list[tuple[float, float | None]] = field(default_factory=list)  # s since the first joint state
     topics: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
@@ -78,6 +79,9 @@ def describe(report: BagReport) -> str:
         lines.append(f"  segment {number}: {segment.messages} messages over {span:.3f} s{note}")
     if report.zero_stamps:
         lines.append(f"{report.zero_stamps} messages had a zero header.stamp: their recording time was used")
+    for start, end in report.contacts:
+        until = f"to {end:.3f} s" if end is not None else "to the end"
+        lines.append(f"contact: from {start:.3f} s {until} (since the first joint state)")
     if report.missing_joints:
         lines.append(f"joints of the model never in the recording: {', '.join(report.missing_joints)}")
     if report.ignored_names:

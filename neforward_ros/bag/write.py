@@ -12,7 +12,7 @@ import numpy as np
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.model import RobotModel
 from neforward_ros.node import messages
-from neforward_ros.node.messages import per_link_messages
+from neforward_ros.node.messages import dynamics_messages, per_link_messages
 from neforward_ros.node.names import NodeNames
 from neforward_ros.node.result import Result
 from neforward_ros.node.topics import COM_STATES, LINK_STATES, output_list
@@ -23,7 +23,15 @@ from neforward_ros.wire.rostypes import facts
 def output_topics(options: BagOptions) -> list[tuple[str, str]]:
     """(topic, type) of every output: the node's, resolved in the root namespace."""
     names = NodeNames()
-    return [(names.resolve(o.topic), o.type) for o in output_list(options.accel_links, options.imu_links, False)]
+    outputs = output_list(
+        options.accel_links,
+        options.imu_links,
+        False,
+        options.publish_torques,
+        options.wrench_links,
+        bool(options.contact_thresholds),
+    )
+    return [(names.resolve(o.topic), o.type) for o in outputs]
 
 
 class RecordingWriter:
@@ -74,17 +82,19 @@ class RecordingWriter:
                 self._multi_dof, self._templates(result), result.blocks, strict=True
             )
         ]
-        per_link = bool(options.accel_links or options.imu_links)
-        if not per_link and _FAST_MCAP and _write_rows_mcap(self.writer, streams, log_times):
+        per_sample = bool(options.accel_links or options.imu_links or options.dynamics_needed)
+        if not per_sample and _FAST_MCAP and _write_rows_mcap(self.writer, streams, log_times):
             return
         times = log_times.tolist()
         flat = [(connection, memoryview(data.reshape(-1)), data.shape[1]) for connection, data in streams]
         for i, log_time in enumerate(times):
             for connection, view, size in flat:
                 self.writer.write(connection, log_time, view[i * size : (i + 1) * size])
-            if per_link:
+            if per_sample:
                 sample = result.sample(i)
-                for topic, contents in per_link_messages(sample, options.accel_links, options.imu_links, prefix):
+                rest = per_link_messages(sample, options.accel_links, options.imu_links, prefix)
+                rest += dynamics_messages(sample, options.publish_torques, options.wrench_links, prefix)
+                for topic, contents in rest:
                     connection = self.connections[names.resolve(topic)]
                     self.writer.write(connection, log_time, cdr.encode(connection.msgtype, contents))
 

@@ -151,6 +151,9 @@ class JointEstimate:
         accelerations: rad/s^2 or m/s^2.
         ages: seconds from each joint's newest sample at or before the stamp to the stamp.
         ready: per joint, whether the entries are estimates.
+        efforts: the efforts the messages carried (N m or N), at the stamp: a sample's own at its
+            stamp, else interpolated between the samples around it; NaN where there are none. None
+            when not known at all (supplied states without efforts).
     """
 
     stamp_ns: int
@@ -160,6 +163,7 @@ class JointEstimate:
     accelerations: np.ndarray
     ages: np.ndarray
     ready: np.ndarray
+    efforts: np.ndarray | None = None
 
     @property
     def all_ready(self) -> bool:
@@ -176,10 +180,12 @@ class _Group:
     """
 
     __slots__ = (
+        "_efforts",
         "_positions",
         "_seconds",
         "_stamps",
         "_velocities",
+        "any_effort",
         "end",
         "holes",
         "intervals",
@@ -204,6 +210,8 @@ class _Group:
         self._seconds = np.empty(capacity)
         self._positions = np.empty((capacity, len(joints)))
         self._velocities = np.empty((capacity, len(joints)))
+        self._efforts = np.empty((capacity, len(joints)))
+        self.any_effort = False  # whether a message ever gave an effort for these joints
         self.start = 0
         self.end = 0
         self.last_without_velocity = -1  # buffer index of the newest sample that had no velocity at all
@@ -230,6 +238,11 @@ class _Group:
         """(count, joints), NaN where a message gave none."""
         return self._velocities[self.start : self.end]
 
+    @property
+    def efforts(self) -> np.ndarray:
+        """(count, joints), NaN where a message gave none."""
+        return self._efforts[self.start : self.end]
+
     def end_slack(self) -> int | None:
         """How far, ns, an estimate's support may reach past this group's newest sample: one and a half
         of its longest recent sample intervals (a jittered sample comes a little late)."""
@@ -246,10 +259,12 @@ class _Group:
     def newest_position(self, joint: int) -> float:
         return float(self._positions[self.end - 1, self.slots[joint]])
 
-    def append(self, stamp_ns: int, positions: list[float], velocities: list[float], max_hole_ns: int) -> None:
+    def append(
+        self, stamp_ns: int, positions: list[float], velocities: list[float], efforts: list[float], max_hole_ns: int
+    ) -> None:
         if self.end == len(self._stamps):
             count = len(self)
-            arrays = ("_stamps", "_seconds", "_positions", "_velocities")
+            arrays = ("_stamps", "_seconds", "_positions", "_velocities", "_efforts")
             if count > len(self._stamps) // 2:
                 for name in arrays:
                     old = getattr(self, name)
@@ -270,6 +285,9 @@ class _Group:
         self._seconds[end] = (stamp_ns - self.origin) / NS
         self._positions[end] = positions
         self._velocities[end] = velocities
+        self._efforts[end] = efforts
+        if not self.any_effort and any(e == e for e in efforts):  # not all NaN
+            self.any_effort = True
         if all(v != v for v in velocities):  # all NaN
             self.last_without_velocity = end
         self.end = end + 1
@@ -294,6 +312,8 @@ class _Group:
         moved._seconds[:count] = self.seconds
         moved._positions[:count] = self.positions[:, columns]
         moved._velocities[:count] = self.velocities[:, columns]
+        moved._efforts[:count] = self.efforts[:, columns]
+        moved.any_effort = self.any_effort
         moved.end = count
         moved.holes = list(self.holes)
         moved.intervals = self.intervals.copy()
@@ -310,8 +330,21 @@ class _Group:
             self.track = self.track.select(columns)
         self._positions = self._positions[:, columns].copy()
         self._velocities = self._velocities[:, columns].copy()
+        self._efforts = self._efforts[:, columns].copy()
         self.joints = keep
         self.slots = {j: k for k, j in enumerate(keep)}
+
+
+def _effort_at(group: _Group, k: int, target: int) -> np.ndarray:
+    """The group's efforts at the target: sample k's at its stamp, else interpolated between k and
+    k + 1 when there is a sample after (NaN otherwise, and where a message gave none)."""
+    efforts = group.efforts
+    stamps = group.stamps
+    before = int(stamps[k])
+    if target == before or k + 1 >= len(stamps):
+        return efforts[k] if target == before else np.full(len(group.joints), np.nan)
+    weight = (target - before) / (int(stamps[k + 1]) - before)
+    return efforts[k] + weight * (efforts[k + 1] - efforts[k])
 
 
 class StreamingEstimator:
@@ -385,6 +418,7 @@ class StreamingEstimator:
         names: Sequence[str],
         positions: Sequence[float],
         velocities: Sequence[float] = (),
+        efforts: Sequence[float] = (),
         *,
         receive_ns: int | None = None,
     ) -> list[JointEstimate]:
@@ -392,11 +426,12 @@ class StreamingEstimator:
 
         Args:
             stamp_ns: header stamp, integer nanoseconds; 0 means "not set".
-            names, positions, velocities: the message's fields (velocities may be empty).
+            names, positions, velocities, efforts: the message's fields (velocities and efforts may
+                be empty).
             receive_ns: receive time, used when stamp_ns is 0.
         """
         try:
-            return self._update(int(stamp_ns), names, positions, velocities, receive_ns)
+            return self._update(int(stamp_ns), names, positions, velocities, efforts, receive_ns)
         except Exception as exc:
             self._log.every("internal", logging.ERROR, f"joint state dropped: {type(exc).__name__}: {exc}")
             return []
@@ -441,6 +476,7 @@ class StreamingEstimator:
         names: Sequence[str],
         positions: Sequence[float],
         velocities: Sequence[float],
+        efforts: Sequence[float],
         receive_ns: int | None,
     ) -> list[JointEstimate]:
         if stamp <= 0:
@@ -451,14 +487,14 @@ class StreamingEstimator:
                 "zero-stamp", logging.WARNING, "joint states carry a zero header.stamp; using the receive time instead"
             )
             stamp = int(receive_ns)
-        samples = self._read_message(names, positions, velocities)
+        samples = self._read_message(names, positions, velocities, efforts)
         if samples is None:
             return []
         out: list[JointEstimate] = []
         if (
             self._clock is not None
             and stamp < self._clock
-            and any(self._group_of[j] is not None and stamp < self._group_of[j].newest_stamp for j, _, _ in samples)
+            and any(self._group_of[j] is not None and stamp < self._group_of[j].newest_stamp for j, _, _, _ in samples)
         ):
             self._log.every(
                 "backwards",
@@ -490,9 +526,10 @@ class StreamingEstimator:
         return out
 
     def _read_message(
-        self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float]
-    ) -> list[tuple[int, float, float]] | None:
-        """The message's usable samples as (joint index, position, velocity or NaN); None rejects it."""
+        self, names: Sequence[str], positions: Sequence[float], velocities: Sequence[float], efforts: Sequence[float]
+    ) -> list[tuple[int, float, float, float]] | None:
+        """The message's usable samples as (joint index, position, velocity or NaN, effort or NaN);
+        None rejects it."""
         count = len(names)
         if len(positions) != count:
             self._log.every(
@@ -508,16 +545,22 @@ class StreamingEstimator:
         elif not all(math.isfinite(v) for v in velocity):
             self._log.every(("nan", "velocities"), logging.WARNING, "joint state with non-finite velocities: dropped")
             velocity = [v if math.isfinite(v) else math.nan for v in velocity]
+        effort = self._floats(efforts, "efforts", count) if len(efforts) else None
+        if effort is None:
+            effort = [math.nan] * count
+        elif not math.isfinite(sum(effort)):
+            self._log.every(("nan", "efforts"), logging.WARNING, "joint state with non-finite efforts: dropped")
+            effort = [e if math.isfinite(e) else math.nan for e in effort]
         indices = self._indices(names)
         if math.isfinite(sum(position)):  # the usual case: every position is a number (inf - inf is NaN)
-            return [(j, position[k], velocity[k]) for k, j in indices]
+            return [(j, position[k], velocity[k], effort[k]) for k, j in indices]
         samples = []
         for k, j in indices:
             if not math.isfinite(position[k]):
                 name = self.joint_names[j]
                 self._log.every(("nan", name), logging.WARNING, f"joint {name!r}: non-finite position, sample dropped")
                 continue
-            samples.append((j, position[k], velocity[k]))
+            samples.append((j, position[k], velocity[k], effort[k]))
         return samples
 
     def _indices(self, names: Sequence[str]) -> list[tuple[int, int]]:
@@ -554,17 +597,17 @@ class StreamingEstimator:
             self._log.every(("type", what), logging.WARNING, f"joint state {what} are not numbers: ignored")
             return None
 
-    def _add(self, stamp: int, samples: list[tuple[int, float, float]]) -> bool:
+    def _add(self, stamp: int, samples: list[tuple[int, float, float, float]]) -> bool:
         """Append one message's samples to their groups; returns whether any was added.
 
         A repeated stamp is skipped. A joint whose previous sample is newer, or more than max_gap
         older, restarts its history. Joints of a group that arrive without the rest of it move,
         with their history, into a group of their own.
         """
-        by_group: dict[int, tuple[_Group, dict[int, tuple[float, float]]]] = {}
-        fresh: dict[int, tuple[float, float]] = {}
+        by_group: dict[int, tuple[_Group, dict[int, tuple[float, float, float]]]] = {}
+        fresh: dict[int, tuple[float, float, float]] = {}
         restarted: list[str] = []
-        for j, position, velocity in samples:
+        for j, position, velocity, effort in samples:
             group = self._group_of[j]
             if self.settings.velocity_source == "message" and math.isnan(velocity):
                 self._log.once(
@@ -584,26 +627,26 @@ class StreamingEstimator:
                     if self._wrap[j]:
                         previous = group.newest_position(j)
                         position = previous + (position - previous + math.pi) % (2.0 * math.pi) - math.pi
-                    by_group.setdefault(id(group), (group, {}))[1][j] = (position, velocity)
+                    by_group.setdefault(id(group), (group, {}))[1][j] = (position, velocity, effort)
                     continue
                 restarted.append(f"{self.joint_names[j]!r} ({reason})")
                 self._forget(group, [j])
-            fresh[j] = (position, velocity)
+            fresh[j] = (position, velocity, effort)
         if restarted:
             self._log.every("restart", logging.WARNING, f"history restarted for joint {', '.join(restarted)}")
         for group, values in by_group.values():
             if len(values) < len(group.joints):
                 group = self._split(group, [j for j in group.joints if j in values])
-            group.append(
-                stamp, [values[j][0] for j in group.joints], [values[j][1] for j in group.joints], self._hole_ns
-            )
+            columns = [values[j] for j in group.joints]
+            group.append(stamp, *(list(x) for x in zip(*columns, strict=True)), self._hole_ns)
         if fresh:
             track = KalmanTrack(self._motion, smooth=self._lag_ns > 0) if self._motion is not None else None
             group = _Group(sorted(fresh), self._origin, track=track)
             self._groups.append(group)
             for j in group.joints:
                 self._group_of[j] = group
-            group.append(stamp, [fresh[j][0] for j in group.joints], [fresh[j][1] for j in group.joints], self._hole_ns)
+            columns = [fresh[j] for j in group.joints]
+            group.append(stamp, *(list(x) for x in zip(*columns, strict=True)), self._hole_ns)
         return bool(by_group or fresh)
 
     def _forget(self, group: _Group, joints: list[int]) -> None:
@@ -630,16 +673,16 @@ class StreamingEstimator:
 
     def _estimate(self, target: int) -> JointEstimate:
         n = len(self.joint_names)
-        state = np.full((n, 3), np.nan)
+        state = np.full((n, 4), np.nan)  # position, velocity, acceleration, effort
         ages = np.full(n, np.inf)
         for group in self._groups:
             self._estimate_group(target, group, state, ages)
             if group.track is not None:
                 group.track.forget_before(target)
-        ready = np.isfinite(state).all(axis=1)
+        ready = np.isfinite(state[:, :3]).all(axis=1)
         if not ready.all():
-            state[~ready] = np.nan
-        return JointEstimate(target, self.segment, state[:, 0], state[:, 1], state[:, 2], ages, ready)
+            state[~ready, :3] = np.nan
+        return JointEstimate(target, self.segment, state[:, 0], state[:, 1], state[:, 2], ages, ready, state[:, 3])
 
     def _estimate_group(self, target: int, group: _Group, state: np.ndarray, ages: np.ndarray) -> None:
         """Fill state (n, 3) and ages (n,) at the target for one group's joints, if its samples cover
@@ -659,6 +702,8 @@ class StreamingEstimator:
         ages[members] = age_ns / NS
         if age_ns > self._gap_ns:
             return  # stale: not ready
+        if group.any_effort:
+            state[members, 3] = _effort_at(group, k, target)
         reason = uncovered(stamps, target, self._support, group.holes, group.end_slack())
         if reason is not None:
             self._say_why(group, reason)

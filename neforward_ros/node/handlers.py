@@ -52,8 +52,8 @@ class MessageHandlers:
         """A sensor_msgs/JointState, as CDR bytes."""
         self.messages_in += 1
         try:
-            stamp, names, positions, velocities, _ = cdr.decode_joint_state(data)
-            results = self.pipeline.on_joint_state(stamp, names, positions, velocities, receive_ns=receive_ns)
+            stamp, names, positions, velocities, efforts = cdr.decode_joint_state(data)
+            results = self.pipeline.on_joint_state(stamp, names, positions, velocities, efforts, receive_ns=receive_ns)
         except Exception as exc:
             self._dropped("joint state", exc)
             return
@@ -65,7 +65,9 @@ class MessageHandlers:
         try:
             message = deserialize(topics.JOINT_TRAJECTORY_TYPE, data)
             points = [
-                TrajectoryPoint(p["positions"], p["velocities"], p["accelerations"], stamp_ns(p["time_from_start"]))
+                TrajectoryPoint(
+                    p["positions"], p["velocities"], p["accelerations"], stamp_ns(p["time_from_start"]), p["effort"]
+                )
                 for p in message["points"]
             ]
             stamp = stamp_ns(message["header"]["stamp"])

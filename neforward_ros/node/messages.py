@@ -14,6 +14,10 @@ Frames and points (see the README topic table):
 - <link>/accel, <link>/twist: the link origin's, in the link frame.
 - <link>/imu: angular velocity and specific force in the link frame; orientation of the link in
   the root frame.
+- joint_torques, external_torques (sensor_msgs/JointState): the model's joint torques, and measured
+  effort minus them, with the joint states they come from.
+- <link>/wrench: what the link receives through its parent joint, link frame, about its origin.
+- contact (std_msgs/Bool): the debounced contact state.
 Linear accelerations are classical (not spatial) accelerations minus gravity: the specific force an
 accelerometer reads; with gravity set to zero they are kinematic accelerations.
 """
@@ -29,6 +33,9 @@ from neforward_ros.node.result import Blocks, Result
 from neforward_ros.node.settings import NodeSettings
 from neforward_ros.node.topics import (
     COM_STATES,
+    CONTACT,
+    EXTERNAL_TORQUES,
+    JOINT_TORQUES,
     LINK_STATES,
     LINK_STATES_TYPE,
     MARKERS,
@@ -36,6 +43,7 @@ from neforward_ros.node.topics import (
     imu_topic,
     output_list,
     twist_topic,
+    wrench_topic,
 )
 from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr
@@ -179,6 +187,72 @@ def markers(result: Result, frame_prefix: str = "", scale: float = 0.02) -> Mess
     return {"markers": out}
 
 
+def joint_torques(result: Result) -> Message:
+    """sensor_msgs/JointState: every joint column with its position and velocity (as estimated) and, as
+    ``effort``, the torque (N m; N for a prismatic joint) the model says its motor produces."""
+    dynamics = result.dynamics
+    assert dynamics is not None
+    return {
+        "header": header(result.stamp_ns, ""),
+        "name": list(dynamics.joint_names),
+        "position": dynamics.positions.tolist(),
+        "velocity": dynamics.velocities.tolist(),
+        "effort": dynamics.torques.tolist(),
+    }
+
+
+def external_torques(result: Result) -> Message | None:
+    """sensor_msgs/JointState of the joints whose input carried an effort: ``effort`` = measured
+    (scaled, offset) - model, positive where the motor gives more than the motion needs, as it does
+    holding an unmodelled payload up; None when no joint has a measured effort."""
+    dynamics = result.dynamics
+    assert dynamics is not None
+    external = dynamics.external
+    keep = np.flatnonzero(np.isfinite(external))
+    if len(keep) == 0:
+        return None
+    return {
+        "header": header(result.stamp_ns, ""),
+        "name": [dynamics.joint_names[k] for k in keep],
+        "position": dynamics.positions[keep].tolist(),
+        "velocity": dynamics.velocities[keep].tolist(),
+        "effort": external[keep].tolist(),
+    }
+
+
+def wrench_stamped(result: Result, link: int, frame_prefix: str = "") -> Message:
+    """geometry_msgs/WrenchStamped: what the link receives from its parent through its parent joint
+    (force N, torque N m about the link origin), in the link frame; the root's from the world."""
+    dynamics = result.dynamics
+    assert dynamics is not None
+    k = result.ids[link]  # the dynamics cover every link of the model
+    return {
+        "header": header(result.stamp_ns, frame_prefix + result.link_names[link]),
+        "wrench": {"force": vector3(dynamics.force[k]), "torque": vector3(dynamics.moment[k])},
+    }
+
+
+def dynamics_messages(
+    result: Result, publish_torques: bool, wrench_links: Sequence[str], frame_prefix: str
+) -> list[tuple[str, Message]]:
+    """(topic, contents) of the joint-torque, wrench and contact outputs of one result, in
+    :func:`output_list` order: none without dynamics (a stamp where some joint has no state)."""
+    out: list[tuple[str, Message]] = []
+    if result.dynamics is None:
+        return out
+    if publish_torques:
+        out.append((JOINT_TORQUES, joint_torques(result)))
+        external = external_torques(result)
+        if external is not None:
+            out.append((EXTERNAL_TORQUES, external))
+    for link in wrench_links:
+        if link in result.link_names:
+            out.append((wrench_topic(link), wrench_stamped(result, result.link_names.index(link), frame_prefix)))
+    if result.contact is not None:
+        out.append((CONTACT, {"data": result.contact}))
+    return out
+
+
 def per_link_messages(
     result: Result, accel_links: Sequence[str], imu_links: Sequence[str], frame_prefix: str
 ) -> list[tuple[str, Message]]:
@@ -205,7 +279,7 @@ def all_messages(result: Result, settings: NodeSettings) -> list[tuple[str, Mess
     out += per_link_messages(result, settings.accel_links, settings.imu_links, prefix)
     if settings.publish_markers:
         out.append((MARKERS, markers(result, prefix, settings.marker_scale)))
-    return out
+    return out + dynamics_messages(result, settings.publish_torques, settings.wrench_links, prefix)
 
 
 class Templates:
@@ -246,7 +320,8 @@ class Encoder:
     def __init__(self, settings: NodeSettings) -> None:
         self.settings = settings
         self._types = {output.topic: output.type for output in output_list(
-            settings.accel_links, settings.imu_links, settings.publish_markers
+            settings.accel_links, settings.imu_links, settings.publish_markers, settings.publish_torques,
+            settings.wrench_links, bool(settings.contact_thresholds),
         )}  # fmt: skip
         self.templates = Templates(settings.frame_prefix)
 
@@ -262,5 +337,6 @@ class Encoder:
         rest = per_link_messages(result, settings.accel_links, settings.imu_links, settings.frame_prefix)
         if settings.publish_markers:
             rest.append((MARKERS, markers(result, settings.frame_prefix, settings.marker_scale)))
+        rest += dynamics_messages(result, settings.publish_torques, settings.wrench_links, settings.frame_prefix)
         out += [(topic, cdr.encode(self._types[topic], contents)) for topic, contents in rest]
         return out

@@ -15,15 +15,17 @@ from typing import Any
 
 import numpy as np
 
+from neforward_ros.dynamics import split_values, wrenches_from_table
 from neforward_ros.errors import ModelError
 from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator
 from neforward_ros.kernel import kernel_of
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel, load_model
 from neforward_ros.node import messages
+from neforward_ros.node.contact import ContactDetector
 from neforward_ros.node.names import is_token
 from neforward_ros.node.policy import apply_policy, hold_vector
-from neforward_ros.node.result import Result, make_result
+from neforward_ros.node.result import Dynamics, Result, make_result
 from neforward_ros.node.settings import NodeSettings
 from neforward_ros.node.topics import ROBOT_DESCRIPTION, Output, output_list
 from neforward_ros.recursion import kinematics_table, root_state
@@ -31,12 +33,14 @@ from neforward_ros.recursion import kinematics_table, root_state
 
 @dataclass(frozen=True)
 class TrajectoryPoint:
-    """One trajectory_msgs/JointTrajectoryPoint: positions, velocities, accelerations, time_from_start."""
+    """One trajectory_msgs/JointTrajectoryPoint: positions, velocities, accelerations, time_from_start,
+    and efforts (may be empty: then none is measured)."""
 
     positions: Sequence[float]
     velocities: Sequence[float]
     accelerations: Sequence[float]
     time_from_start_ns: int = 0
+    efforts: Sequence[float] = ()
 
 
 class Pipeline:
@@ -59,7 +63,9 @@ class Pipeline:
         self._estimator: StreamingEstimator | None = None
         self._encoder: messages.Encoder | None = None
         self._hold = np.zeros(0)
-        for link in (*settings.accel_links, *settings.imu_links):
+        self._effort_scale = self._effort_offset = np.zeros(0)
+        self._contact: ContactDetector | None = None
+        for link in (*settings.accel_links, *settings.imu_links, *settings.wrench_links):
             if not is_token(link):
                 raise ModelError(f"link {link!r} cannot be part of a ROS 2 topic name (letters, digits, _)")
         if settings.robot_description:
@@ -87,23 +93,46 @@ class Pipeline:
 
     def set_model(self, model: RobotModel, source: str = "caller") -> None:
         """Use ``model`` from now on; joint histories restart."""
+        settings = self.settings
         missing = [
-            link for link in (*self.settings.accel_links, *self.settings.imu_links) if link not in model.link_index
+            link
+            for link in (*settings.accel_links, *settings.imu_links, *settings.wrench_links)
+            if link not in model.link_index
         ]
         if missing:
             self._log.log(
                 logging.ERROR,
-                f"accel_links/imu_links name links that robot {model.name!r} does not have: {', '.join(missing)}; "
-                "nothing is published for them",
+                f"accel_links/imu_links/wrench_links name links that robot {model.name!r} does not have: "
+                f"{', '.join(missing)}; nothing is published for them",
             )
-        unknown_held = [name for name in self.settings.hold_positions if name not in model.joint_index]
-        if unknown_held:
-            self._log.log(
-                logging.ERROR,
-                f"hold.joint_names name joints that robot {model.name!r} does not have (or mimic joints, which "
-                f"follow their leader): {', '.join(unknown_held)}; ignored",
+        for parameter, names in (
+            ("hold.joint_names", settings.hold_positions),
+            ("effort.joint_names", settings.effort_scale),
+            ("contact.joint_names", settings.contact_thresholds),
+        ):
+            unknown = [name for name in names if name not in model.joint_index]
+            if unknown:
+                self._log.log(
+                    logging.ERROR,
+                    f"{parameter} name joints that robot {model.name!r} does not have (or mimic joints, which "
+                    f"follow their leader): {', '.join(unknown)}; ignored",
+                )
+        self._hold = hold_vector(model.joint_names, settings.hold_positions)
+        self._effort_scale = np.array([settings.effort_scale.get(n, 1.0) for n in model.joint_names])
+        self._effort_offset = np.array([settings.effort_offset.get(n, 0.0) for n in model.joint_names])
+        self._contact = (
+            ContactDetector(
+                np.array([settings.contact_thresholds.get(n, np.nan) for n in model.joint_names]),
+                settings.contact_debounce,
+                model.joint_names,
+                self._log,
             )
-        self._hold = hold_vector(model.joint_names, self.settings.hold_positions)
+            if settings.contact_thresholds
+            else None
+        )
+        if settings.dynamics_needed:
+            for warning in model.inertia_warnings:
+                self._log.log(logging.WARNING, warning)
         kernel_of(model)  # generate the recursion now, not while the first joint states wait
         self.model = model
         self._estimator = StreamingEstimator(
@@ -134,7 +163,14 @@ class Pipeline:
     def outputs(self) -> list[Output]:
         """Every topic published with these settings (known before the model arrives)."""
         settings = self.settings
-        return output_list(settings.accel_links, settings.imu_links, settings.publish_markers)
+        return output_list(
+            settings.accel_links,
+            settings.imu_links,
+            settings.publish_markers,
+            settings.publish_torques,
+            settings.wrench_links,
+            bool(settings.contact_thresholds),
+        )
 
     def messages(self, result: Result) -> list[tuple[str, dict[str, Any]]]:
         """(topic, message contents) for every output of one result."""
@@ -154,6 +190,7 @@ class Pipeline:
         names: Sequence[str],
         positions: Sequence[float],
         velocities: Sequence[float] = (),
+        efforts: Sequence[float] = (),
         *,
         receive_ns: int | None = None,
     ) -> list[Result]:
@@ -162,7 +199,7 @@ class Pipeline:
             self._log.every("no-model", logging.WARNING, "joint states dropped: no robot model yet")
             return []
         try:
-            estimates = self._estimator.update(stamp_ns, names, positions, velocities, receive_ns=receive_ns)
+            estimates = self._estimator.update(stamp_ns, names, positions, velocities, efforts, receive_ns=receive_ns)
             return [r for r in (self._result(e) for e in estimates) if r is not None]
         except Exception as exc:
             self._log.every("internal", logging.ERROR, f"joint state dropped: {type(exc).__name__}: {exc}")
@@ -210,6 +247,8 @@ class Pipeline:
             )
             return None
         state = np.full((3, len(model.joint_names)), np.nan)
+        efforts = np.full(len(model.joint_names), np.nan)
+        with_effort = len(point.efforts) == count
         ignored = set(model.mimic_joint_names)
         for k, name in enumerate(names):
             j = model.joint_index.get(name)
@@ -218,6 +257,8 @@ class Pipeline:
                     self._log.once(("unknown", name), logging.WARNING, f"joint trajectory names unknown joint {name!r}")
                 continue
             state[:, j] = [float(f[k]) for f in fields]
+            if with_effort:
+                efforts[j] = float(point.efforts[k])
         if not np.all(np.isfinite(state)):
             missing = [n for n, ok in zip(model.joint_names, np.isfinite(state).all(0), strict=True) if not ok]
             self._log.every(
@@ -235,6 +276,7 @@ class Pipeline:
             accelerations=state[2],
             ages=np.zeros(len(model.joint_names)),
             ready=np.ones(len(model.joint_names), dtype=bool),
+            efforts=efforts,
         )
         return self._result(estimate)
 
@@ -267,4 +309,20 @@ class Pipeline:
             q, qd, qdd = published.q, published.qd, published.qdd
         # The estimator's and the supplied states are finite by construction: no input checks here.
         table = kinematics_table(model, q, qd, qdd, root_state(settings.gravity))
-        return make_result(model, estimate.stamp_ns, table, determined)
+        result = make_result(model, estimate.stamp_ns, table, determined)
+        if settings.dynamics_needed and determined is None:
+            result = self._with_dynamics(result, estimate, q, qd, table)
+        return result
+
+    def _with_dynamics(
+        self, result: Result, estimate: JointEstimate, q: np.ndarray, qd: np.ndarray, table: np.ndarray
+    ) -> Result:
+        """The result with its joint torques, joint wrenches and contact state (every joint known)."""
+        model = self.model
+        assert model is not None
+        force, moment, torques = split_values(model, wrenches_from_table(model, q, table))
+        efforts = estimate.efforts if estimate.efforts is not None else np.full(len(model.joint_names), np.nan)
+        measured = self._effort_scale * efforts + self._effort_offset
+        dynamics = Dynamics(model.joint_names, q, qd, torques, measured, force, moment)
+        contact = self._contact.update(estimate.stamp_ns, dynamics.external) if self._contact is not None else None
+        return replace(result, dynamics=dynamics, contact=contact)

@@ -15,6 +15,41 @@ from neforward_ros.recursion import LinkKinematics
 
 
 @dataclass(frozen=True)
+class Dynamics:
+    """The backward pass of one stamp, or (a leading sample axis) of many: what ~/joint_torques,
+    ~/external_torques and ~/<link>/wrench publish.
+
+    Attributes:
+        joint_names: the model's joint columns.
+        positions, velocities: (..., n) the joint states it was computed from (as estimated).
+        torques: (..., n) the model's joint torques, N m (N for prismatic joints).
+        measured: (..., n) the joints' measured efforts, scaled and offset (``effort.*``), at the
+            stamp; NaN where the input had none.
+        force, moment: (..., n_links, 3) what each link receives through its parent joint, N and N m
+            about the link origin, link frame (see :class:`neforward_ros.InverseDynamics`).
+    """
+
+    joint_names: tuple[str, ...]
+    positions: np.ndarray
+    velocities: np.ndarray
+    torques: np.ndarray
+    measured: np.ndarray
+    force: np.ndarray
+    moment: np.ndarray
+
+    def part(self, index: Any) -> Dynamics:
+        """The samples ``index`` (an int or a slice) of a batch."""
+        fields = ("positions", "velocities", "torques", "measured", "force", "moment")
+        return Dynamics(self.joint_names, *(getattr(self, name)[index] for name in fields))
+
+    @property
+    def external(self) -> np.ndarray:
+        """measured - model: the torque the motors give beyond what the motion needs, NaN where not
+        measured (see the README for its sign)."""
+        return self.measured - self.torques
+
+
+@dataclass(frozen=True)
 class Result:
     """Everything published for one stamp, or (arrays with a leading sample axis) for many.
 
@@ -26,6 +61,10 @@ class Result:
         link_ids: each row's link index in the model (marker ids); None when the rows are every link.
         determined: a batch's (T, n_links) per sample, whether the link's numbers are estimates (every
             joint that moves it had one); None when all are. :meth:`runs` splits a batch by it.
+        dynamics: joint torques and wrenches, when asked for and every joint has a state (a batch's:
+            NaN at the samples where some joint has none).
+        contact: ~/contact's state at this stamp, when contact thresholds are set and measured (a
+            batch's: (T,) floats, 1 or 0, NaN where unknown).
     """
 
     stamp_ns: Any
@@ -34,6 +73,8 @@ class Result:
     table: np.ndarray
     link_ids: tuple[int, ...] | None = None
     determined: np.ndarray | None = None
+    dynamics: Dynamics | None = None
+    contact: Any = None
 
     @property
     def ids(self) -> tuple[int, ...]:
@@ -65,7 +106,22 @@ class Result:
         out = []
         for start, stop in itertools.pairwise(edges):
             part = slice(start, stop)
-            run = replace(self, stamp_ns=self.stamp_ns[part], table=self.table[part], determined=None)
+            run = replace(
+                self,
+                stamp_ns=self.stamp_ns[part],
+                table=self.table[part],
+                determined=None,
+                dynamics=None
+                if self.dynamics is None
+                else Dynamics(
+                    self.dynamics.joint_names,
+                    *(
+                        getattr(self.dynamics, f)[part]
+                        for f in ("positions", "velocities", "torques", "measured", "force", "moment")
+                    ),
+                ),
+                contact=None if self.contact is None else self.contact[part],
+            )
             out.append((part, run.only(self.determined[start])))
         return out
 
@@ -87,7 +143,20 @@ class Result:
     def sample(self, index: int) -> Result:
         """One sample of a batched result (all of whose links are determined). Its message numbers
         are the batch's own, so the messages of a sample are byte for byte those of the batch."""
-        sample = replace(self, stamp_ns=int(self.stamp_ns[index]), table=self.table[index], determined=None)
+        dynamics = None
+        if self.dynamics is not None and np.isfinite(self.dynamics.torques[index]).all():
+            dynamics = self.dynamics.part(index)
+        contact = None
+        if self.contact is not None and np.isfinite(self.contact[index]):
+            contact = bool(self.contact[index])
+        sample = replace(
+            self,
+            stamp_ns=int(self.stamp_ns[index]),
+            table=self.table[index],
+            determined=None,
+            dynamics=dynamics,
+            contact=contact,
+        )
         if "blocks" in self.__dict__:
             sample.__dict__["blocks"] = tuple(tuple(b[index] for b in blocks) for blocks in self.blocks)
         return sample

@@ -136,6 +136,22 @@ PARAMETERS: tuple[Parameter, ...] = (
     ),
     Parameter("hold.joint_names", "string[]", [], "hold: joints with a hold position other than 0."),
     Parameter("hold.positions", "double[]", [], "hold: their positions, rad (m), in the order of hold.joint_names."),
+    Parameter(
+        "publish_torques",
+        "bool",
+        False,
+        "Publish ~/joint_torques (the model's) and ~/external_torques (measured effort - model) for every stamp "
+        "where every joint has an estimate.",
+    ),
+    Parameter("effort.joint_names", "string[]", [], "Joints whose efforts are scaled and offset before use."),
+    Parameter("effort.scale", "double[]", [], "Their scales (measured = scale * effort + offset), in that order."),
+    Parameter("effort.offset", "double[]", [], "Their offsets, N m (N), in that order."),
+    Parameter("wrench_links", "string[]", [], "Links that get ~/<link>/wrench: what their parent joint transmits."),
+    Parameter("contact.joint_names", "string[]", [], "Joints watched for contact: ~/contact (std_msgs/Bool)."),
+    Parameter("contact.thresholds", "double[]", [], "|external torque| above which each is in contact, N m (N)."),
+    Parameter(
+        "contact.debounce", "double", 0.02, "s a change (contact or none) must last before ~/contact follows it."
+    ),
     Parameter("accel_links", "string[]", [], "Links that get ~/<link>/accel and ~/<link>/twist (link frame)."),
     Parameter("imu_links", "string[]", [], "Links that get a virtual IMU, ~/<link>/imu (sensor_msgs/Imu)."),
     Parameter("publish_markers", "bool", False, "Publish ~/markers: an arrow per link for its COM acceleration."),
@@ -184,6 +200,11 @@ class NodeSettings:
         estimator: the streaming estimator's settings.
         publish_policy: "partial", "wait" or "hold".
         hold_positions: joint name -> position held under the "hold" policy (others: 0).
+        publish_torques: whether ~/joint_torques and ~/external_torques are published.
+        effort_scale, effort_offset: joint name -> measured = scale * effort + offset (others 1, 0).
+        wrench_links: links with ~/<link>/wrench.
+        contact_thresholds: joint name -> |external torque| threshold; empty: no ~/contact.
+        contact_debounce: s.
         accel_links, imu_links: links with per-link topics.
         publish_markers: whether ~/markers is published.
         marker_scale: m per m/s^2.
@@ -199,6 +220,12 @@ class NodeSettings:
     estimator: StreamSettings = field(default_factory=StreamSettings)
     publish_policy: str = "partial"
     hold_positions: Mapping[str, float] = field(default_factory=dict)
+    publish_torques: bool = False
+    effort_scale: Mapping[str, float] = field(default_factory=dict)
+    effort_offset: Mapping[str, float] = field(default_factory=dict)
+    wrench_links: tuple[str, ...] = ()
+    contact_thresholds: Mapping[str, float] = field(default_factory=dict)
+    contact_debounce: float = 0.02
     accel_links: tuple[str, ...] = ()
     imu_links: tuple[str, ...] = ()
     publish_markers: bool = False
@@ -206,6 +233,11 @@ class NodeSettings:
     frame_prefix: str = ""
     qos_depth: int = 10
     qos_overrides: Mapping[tuple[str, str], QosOverride] = field(default_factory=dict)
+
+    @property
+    def dynamics_needed(self) -> bool:
+        """Whether any output needs the backward pass (torques, wrenches, contact)."""
+        return bool(self.publish_torques or self.wrench_links or self.contact_thresholds)
 
     def qos_override(self, topic: str, entity: str) -> QosOverride:
         """The overrides for a fully qualified topic's ``publisher`` or ``subscription``."""
@@ -248,12 +280,14 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         )
     if merged["qos_depth"] < 1:
         raise InputError(f"parameter qos_depth must be at least 1, got {merged['qos_depth']}")
-    hold_names, hold_values = merged["hold.joint_names"], merged["hold.positions"]
-    if len(hold_names) != len(hold_values):
-        raise InputError(
-            f"parameters hold.joint_names and hold.positions must have the same length, "
-            f"got {len(hold_names)} and {len(hold_values)}"
-        )
+    hold_positions = _per_joint(merged, "hold.joint_names", "hold.positions")
+    effort_scale = _per_joint(merged, "effort.joint_names", "effort.scale", default=1.0)
+    effort_offset = _per_joint(merged, "effort.joint_names", "effort.offset", default=0.0)
+    contact_thresholds = _per_joint(merged, "contact.joint_names", "contact.thresholds")
+    if any(not v > 0.0 for v in contact_thresholds.values()):
+        raise InputError("parameter contact.thresholds must hold positive numbers")
+    if not merged["contact.debounce"] >= 0.0:
+        raise InputError(f"parameter contact.debounce must be at least 0 s, got {merged['contact.debounce']}")
     lag = merged["estimator.lag"]
     try:
         kalman = KalmanSettings(
@@ -281,7 +315,13 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         acceleration_source=merged["acceleration_source"],
         estimator=estimator,
         publish_policy=merged["publish_policy"],
-        hold_positions=dict(zip(hold_names, hold_values, strict=True)),
+        hold_positions=hold_positions,
+        publish_torques=merged["publish_torques"],
+        effort_scale=effort_scale,
+        effort_offset=effort_offset,
+        wrench_links=tuple(merged["wrench_links"]),
+        contact_thresholds=contact_thresholds,
+        contact_debounce=merged["contact.debounce"],
         accel_links=tuple(merged["accel_links"]),
         imu_links=tuple(merged["imu_links"]),
         publish_markers=merged["publish_markers"],
@@ -290,6 +330,19 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         qos_depth=merged["qos_depth"],
         qos_overrides=_qos_overrides(qos),
     )
+
+
+def _per_joint(merged: Mapping[str, Any], names: str, values: str, default: float | None = None) -> dict[str, float]:
+    """Joint name -> value from two parallel array parameters; with a default, the values may be left
+    empty (every joint the default)."""
+    joints, numbers = merged[names], merged[values]
+    if default is not None and not numbers:
+        numbers = [default] * len(joints)
+    if len(joints) != len(numbers):
+        raise InputError(
+            f"parameters {names} and {values} must have the same length, got {len(joints)} and {len(numbers)}"
+        )
+    return dict(zip(joints, numbers, strict=True))
 
 
 def _qos_overrides(values: Mapping[str, Any]) -> dict[tuple[str, str], QosOverride]:

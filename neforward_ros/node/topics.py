@@ -11,6 +11,9 @@ ROBOT_DESCRIPTION = "robot_description"
 LINK_STATES = "~/link_states"
 COM_STATES = "~/com_states"
 MARKERS = "~/markers"
+JOINT_TORQUES = "~/joint_torques"
+EXTERNAL_TORQUES = "~/external_torques"
+CONTACT = "~/contact"
 
 
 LINK_STATES_TYPE = "trajectory_msgs/msg/MultiDOFJointTrajectory"
@@ -21,6 +24,8 @@ MARKERS_TYPE = "visualization_msgs/msg/MarkerArray"
 JOINT_STATE_TYPE = "sensor_msgs/msg/JointState"
 JOINT_TRAJECTORY_TYPE = "trajectory_msgs/msg/JointTrajectory"
 STRING_TYPE = "std_msgs/msg/String"
+WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
+BOOL_TYPE = "std_msgs/msg/Bool"
 
 
 @dataclass(frozen=True)
@@ -31,14 +36,27 @@ class Output:
     type: str
 
 
-def output_list(accel_links: Sequence[str], imu_links: Sequence[str], publish_markers: bool) -> list[Output]:
-    """The node's outputs, relative names: link_states, com_states, per-link topics, markers."""
+def output_list(
+    accel_links: Sequence[str],
+    imu_links: Sequence[str],
+    publish_markers: bool,
+    publish_torques: bool = False,
+    wrench_links: Sequence[str] = (),
+    contact: bool = False,
+) -> list[Output]:
+    """The node's outputs, relative names: link_states, com_states, per-link topics, markers, joint
+    torques, external torques, per-link wrenches, contact."""
     out = [Output(LINK_STATES, LINK_STATES_TYPE), Output(COM_STATES, LINK_STATES_TYPE)]
     for link in accel_links:
         out += [Output(accel_topic(link), ACCEL_TYPE), Output(twist_topic(link), TWIST_TYPE)]
     out += [Output(imu_topic(link), IMU_TYPE) for link in imu_links]
     if publish_markers:
         out.append(Output(MARKERS, MARKERS_TYPE))
+    if publish_torques:
+        out += [Output(JOINT_TORQUES, JOINT_STATE_TYPE), Output(EXTERNAL_TORQUES, JOINT_STATE_TYPE)]
+    out += [Output(wrench_topic(link), WRENCH_TYPE) for link in wrench_links]
+    if contact:
+        out.append(Output(CONTACT, BOOL_TYPE))
     return out
 
 
@@ -52,3 +70,7 @@ def twist_topic(link: str) -> str:
 
 def imu_topic(link: str) -> str:
     return f"~/{link}/imu"
+
+
+def wrench_topic(link: str) -> str:
+    return f"~/{link}/wrench"

@@ -109,6 +109,8 @@ class Client(Node):
         message.header.stamp = stamp(header_ns)
         if plan.get("velocities"):
             message.velocity = qd
+        if plan.get("efforts"):  # one row per message, for the names sent
+            message.effort = [float(e) for e in plan["efforts"][k]]
         return message
 
     def stream(self) -> None:

@@ -153,6 +153,65 @@ def test_a_joint_nobody_publishes_leaves_out_only_the_links_it_moves(graph, tmp_
     assert "no estimate yet for joint(s)" in log  # the warm-up at the start, said once
 
 
+def test_joint_torques_external_torques_wrenches_and_contact(graph, tmp_path) -> None:
+    """The backward pass on a real ROS 2: the drivers' efforts are the arm's torques with a 2 kg
+    payload in the hand from 0.8 s to 1.4 s (Pinocchio's rnea of the URDF with the payload added)."""
+    import numpy as np
+
+    from neforward_ros import inverse_dynamics
+
+    from .ros_checks import truth
+    from conftest import require
+
+    require("pinocchio")
+    from test_torques import Loaded
+
+    wrench = f"/neforward/{HAND}/wrench"
+    record = {
+        "/neforward/joint_torques": "sensor_msgs/msg/JointState",
+        "/neforward/external_torques": "sensor_msgs/msg/JointState",
+        wrench: "geometry_msgs/msg/WrenchStamped",
+        "/neforward/contact": "std_msgs/msg/Bool",
+    }
+    names = list(MODEL.joint_names)
+    node = graph.start(
+        "ros2", "run", "neforward_ros", "neforward_node", "--ros-args", "--params-file",
+        params_file(
+            tmp_path,
+            **panda_parameters(
+                publish_torques=True,
+                wrench_links=[HAND],
+                **{"contact.joint_names": [names[1], names[3], names[5]], "contact.thresholds": [1.0, 1.0, 1.0]},
+                qos_overrides={topic: {"publisher": {"depth": 1000}} for topic in record},
+            ),
+        ),
+    )  # fmt: skip
+    node.wait_for("model 'panda'")
+    plan = moving_plan(MODEL, record=record, expect=360)
+    t = np.arange(plan["count"]) / plan["rate"]
+    q, qd, qdd = truth(MODEL, plan, t)
+    loaded = Loaded()
+    held = (t >= 0.8) & (t < 1.4)
+    efforts = inverse_dynamics(MODEL, q, qd, qdd).joint_torque
+    efforts[held] = [loaded.efforts(*x) for x in zip(q[held], qd[held], qdd[held], strict=True)]
+    received = graph.client({**plan, "efforts": efforts.tolist()})
+    torques = received["/neforward/joint_torques"]
+    assert len(torques) == 360 and torques[0]["name"] == names
+    k = np.array([round((stamp_ns(m) - plan["epoch_ns"]) * plan["rate"] / 1e9) for m in torques])
+    expected = inverse_dynamics(MODEL, q[k], qd[k], qdd[k]).joint_torque
+    got = np.array([m["effort"] for m in torques])
+    assert np.abs(got - expected).max() <= 0.05 * np.abs(expected).max()  # estimated accelerations
+    external = np.array([m["effort"] for m in received["/neforward/external_torques"]])
+    payload = np.array([loaded.jacobian_transpose_wrench(q[i], qd[i], qdd[i]) for i in k])
+    inside = held[k] & (t[k] > 0.85) & (t[k] < 1.35)
+    assert np.abs(external[inside] - payload[inside]).max() <= 0.05 * np.abs(payload[inside]).max()
+    assert np.abs(external[~held[k] & ((t[k] < 0.75) | (t[k] > 1.45))]).max() <= 0.3
+    contact = np.array([m["data"] for m in received["/neforward/contact"]])
+    assert contact[inside].all() and not contact[(t[k] < 0.75) | (t[k] > 1.45)].any()
+    assert len(received[wrench]) == 360 and received[wrench][0]["header"]["frame_id"] == HAND
+    assert "contact: joint(s)" in node.log()
+
+
 def test_supplied_states_are_used_exactly(graph, tmp_path) -> None:
     node = graph.start(
         "ros2", "run", "neforward_ros", "neforward_node", "--ros-args", "--params-file",

@@ -1,0 +1,63 @@
+"""Contact detection: thresholds on the external torques, with a debounce.
+
+A joint is over its threshold when |external torque| (measured effort minus the model's torque)
+exceeds it. ``~/contact`` turns true when some watched joint has been over its threshold for
+``debounce`` seconds, and false again when none has been for ``debounce`` seconds: a spike shorter
+than that (noise, a stick-slip) changes nothing.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from neforward_ros.logs import ThrottledLog
+from neforward_ros.stamps import NS
+
+
+class ContactDetector:
+    """The debounced contact state of a stream of external torques.
+
+    Args:
+        thresholds: (n,) per joint column, N m (N); NaN for joints not watched.
+        debounce: s.
+        joint_names: for the log.
+        log: where transitions and missing efforts are said.
+    """
+
+    def __init__(
+        self, thresholds: np.ndarray, debounce: float, joint_names: tuple[str, ...], log: ThrottledLog
+    ) -> None:
+        self.thresholds = np.asarray(thresholds, dtype=float)
+        self.watched = np.isfinite(self.thresholds)
+        self.debounce_ns = round(debounce * NS)
+        self.joint_names = joint_names
+        self.state = False
+        self._since: int | None = None  # stamp from which the other state has held
+        self._log = log
+
+    def update(self, stamp_ns: int, external: np.ndarray) -> bool | None:
+        """The state at this stamp, or None when no watched joint has a measured effort."""
+        measured = self.watched & np.isfinite(external)
+        if not measured.any():
+            self._log.once(
+                "contact-no-effort",
+                logging.WARNING,
+                "contact detection needs the efforts of joint(s) "
+                f"{', '.join(n for n, w in zip(self.joint_names, self.watched, strict=True) if w)}: "
+                "their joint states carry none",
+            )
+            return None
+        over = measured & (np.abs(np.where(measured, external, 0.0)) > np.where(measured, self.thresholds, 0.0))
+        now = bool(over.any())
+        if now == self.state:
+            self._since = None
+        elif self._since is None:
+            self._since = stamp_ns
+        if now != self.state and stamp_ns - self._since >= self.debounce_ns:
+            self.state = now
+            self._since = None
+            joints = ", ".join(n for n, o in zip(self.joint_names, over, strict=True) if o)
+            self._log.log(logging.INFO, f"contact: {'joint(s) ' + joints + ' over threshold' if now else 'none'}")
+        return self.state
