@@ -11,6 +11,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 _EXPORTS = {
+    "BaseMotion": "neforward_ros.recursion",
     "DEFAULT_GRAVITY": "neforward_ros.recursion",
     "InputError": "neforward_ros.errors",
     "InverseDynamics": "neforward_ros.dynamics",
@@ -31,6 +32,7 @@ _EXPORTS = {
 
 __all__ = [
     "DEFAULT_GRAVITY",
+    "BaseMotion",
     "InputError",
     "InverseDynamics",
     "JointEstimate",
@@ -54,7 +56,7 @@ if TYPE_CHECKING:
     from neforward_ros.estimation.batch import estimate_derivatives
     from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator, StreamSettings
     from neforward_ros.model import JointKind, ParentJoint, RobotModel, load_model
-    from neforward_ros.recursion import DEFAULT_GRAVITY, LinkKinematics, forward_recursion
+    from neforward_ros.recursion import DEFAULT_GRAVITY, BaseMotion, LinkKinematics, forward_recursion
 
 
 def __getattr__(name: str) -> Any:

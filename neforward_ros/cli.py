@@ -33,10 +33,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--method", choices=("polyfit", "kalman", "difference"), default="polyfit", help="estimator (default polyfit)"
     )
     demo.add_argument("--mode", choices=("fixed_lag", "causal"), default="fixed_lag", help="default fixed_lag")
+    demo.add_argument("--root-link", help="the link whose frame is the root frame (default: the URDF's root)")
     table = commands.add_parser("table", help="print every link's omega, alpha, accel, com_accel along a trajectory")
     table.add_argument("--urdf", help=f"URDF file (default: the bundled {DEFAULT_ROBOT})")
     table.add_argument("--seconds", type=float, default=1.0, help="trajectory duration in s (default 1)")
     table.add_argument("--samples", type=int, default=5, help="instants to print (default 5)")
+    table.add_argument("--root-link", help="the link whose frame is the root frame (default: the URDF's root)")
     run = commands.add_parser(
         "run",
         help="the neforward node over Cyclone DDS, without ROS (same topics, types, parameters as neforward_node)",
@@ -101,6 +103,16 @@ def build_parser() -> argparse.ArgumentParser:
         help="write contact (std_msgs/Bool): a joint's |external torque| threshold; repeat for more joints",
     )
     bag.add_argument("--contact-debounce", type=float, default=0.02, help="s (default 0.02)")
+    bag.add_argument(
+        "--base",
+        choices=("fixed", "imu", "odometry"),
+        default="fixed",
+        help="the root link's motion: fixed (default), or from a sensor_msgs/Imu or nav_msgs/Odometry topic",
+    )
+    bag.add_argument("--base-topic", help="the base topic (default: the recording's one topic of that type)")
+    bag.add_argument("--base-link", default="", help="the link the base topic measures (default: its frame id)")
+    bag.add_argument("--world-frame", default="", help="also write world_link_states with this frame id")
+    bag.add_argument("--root-link", help="the link whose frame is the root frame (default: the URDF's root)")
     return parser
 
 
@@ -133,7 +145,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 raise NeforwardError("--samples must be at least 1 and --seconds a non-negative number")
             from neforward_ros.demo.table import print_table
 
-            print_table(args.urdf, args.seconds, args.samples)
+            print_table(args.urdf, args.seconds, args.samples, args.root_link)
         elif args.command == "demo":
             if not (math.isfinite(args.seconds) and args.seconds > 0 and math.isfinite(args.rate) and args.rate > 0):
                 raise NeforwardError("--seconds and --rate must be positive numbers")
@@ -141,7 +153,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from neforward_ros.estimation.stream import StreamSettings
 
             estimator = StreamSettings(method=args.method, mode=args.mode)
-            return live_demo(args.seconds, args.urdf, args.rate, estimator)
+            return live_demo(args.seconds, args.urdf, args.rate, estimator, args.root_link)
         elif args.command == "run":
             from neforward_ros.dds.commands import run_node
 
@@ -165,6 +177,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 effort_offset={k: v[1] if len(v) > 1 else 0.0 for k, v in efforts.items()},
                 contact_thresholds={k: v[0] for k, v in _per_joint(args.contact, "--contact").items()},
                 contact_debounce=args.contact_debounce,
+                base_source=args.base,
+                base_topic=args.base_topic,
+                base_link=args.base_link,
+                world_frame=args.world_frame,
+                root_link=args.root_link,
             )
             report = process_bag(
                 args.input, args.output, options, csv_path=args.csv, plot_path=args.plot, progress=Progress()

@@ -24,6 +24,7 @@ from neforward_ros.kernel import SLICES
 from neforward_ros.model import RobotModel
 from neforward_ros.recursion import (
     DEFAULT_GRAVITY,
+    BaseMotion,
     LinkKinematics,
     check_finite,
     check_gravity,
@@ -72,6 +73,7 @@ def inverse_dynamics(
     gravity: Sequence[float] = DEFAULT_GRAVITY,
     kinematics: LinkKinematics | None = None,
     external_wrenches: Any = None,
+    base: BaseMotion | None = None,
 ) -> InverseDynamics:
     """Joint torques and transmitted wrenches of the robot moving with q, qd, qdd.
 
@@ -86,6 +88,8 @@ def inverse_dynamics(
         external_wrenches: (n_links, 6) or (T, n_links, 6): the wrench the environment applies to
             each link (force N, then moment N m about the link origin), in the link frame; None for
             none.
+        base: the root link's motion for a moving base (see :class:`~neforward_ros.BaseMotion`);
+            the root's wrench is then what must act on the base for that motion.
 
     Returns:
         :class:`InverseDynamics`.
@@ -111,7 +115,8 @@ def inverse_dynamics(
         kin = np.concatenate([getattr(kinematics, field) for field in KIN_FIELDS], axis=-1)  # (..., n_links, 9)
         values = _run_backward(model, q, kin, external)
     else:
-        values = _run_dynamics(model, lists if q.ndim == 1 else (q, qd, qdd), root_state(g), external)
+        root = root_state(g) if base is None else base.root(None if q.ndim == 1 else q.shape[0])
+        values = _run_dynamics(model, lists if q.ndim == 1 else (q, qd, qdd), root, external)
     return _result(model, values)
 
 

@@ -102,6 +102,9 @@ class RobotModel:
             row-major.
         inertia_warnings: inertias that no rigid body can have but that are used as given (principal
             moments violating the triangle inequality), one message per link.
+        floating_base: the floating joint by which the URDF's root (a world link) holds the root
+            link, when it has one: the root link's motion is then an input (a base source), not
+            fixed. None for a fixed-base URDF.
     """
 
     name: str
@@ -114,6 +117,7 @@ class RobotModel:
     mass: tuple[float, ...] = ()
     inertia_in_link: tuple[Mat3, ...] = ()
     inertia_warnings: tuple[str, ...] = ()
+    floating_base: str | None = None
 
     @property
     def root_link(self) -> str:
@@ -270,8 +274,15 @@ def _build_model(robot, root_link: str | None) -> RobotModel:
     roots = [name for name in link_by_name if name not in parent_joint_of]
     if len(roots) > 1:
         raise ModelError(f"the URDF has several root links ({', '.join(roots)}); it must have one")
+    floating_base = None
     if root_link is None:
         root_link = roots[0]
+        # A URDF whose root (a "world" link) holds the robot by a floating joint: that joint is the
+        # base. The robot is the subtree below it; its motion comes from a base source.
+        below = [j for j in robot.joints if j.parent == root_link]
+        if len(below) == 1 and below[0].type == "floating":
+            floating_base = below[0].name
+            root_link = below[0].child
     elif root_link not in link_by_name:
         raise ModelError(f"root_link {root_link!r} is not a link of the URDF")
 
@@ -315,6 +326,7 @@ def _build_model(robot, root_link: str | None) -> RobotModel:
         mass=tuple(mass for mass, _, _ in inertias),
         inertia_in_link=tuple(inertia for _, inertia, _ in inertias),
         inertia_warnings=warnings,
+        floating_base=floating_base,
     )
 
 
@@ -336,8 +348,8 @@ def _check_joint_type(joint) -> None:
         return
     if joint.type in _UNSUPPORTED_TYPES:
         raise ModelError(
-            f"joint {joint.name!r} is {joint.type}: floating and planar joints are not supported "
-            "(use a fixed-base URDF, or choose root_link below the floating joint)"
+            f"joint {joint.name!r} is {joint.type}: a floating joint is supported only between the URDF's root "
+            "(a world link) and the robot's base, and planar joints not at all; choose root_link below it"
         )
     raise ModelError(f"joint {joint.name!r} has unknown type {joint.type!r}")
 
@@ -482,6 +494,7 @@ def _contents(model: RobotModel) -> dict:
         "mass": list(model.mass),
         "inertia_in_link": [list(i) for i in model.inertia_in_link],
         "inertia_warnings": list(model.inertia_warnings),
+        "floating_base": model.floating_base,
         "parent_joints": [
             None if j is None else {**{f: getattr(j, f) for f in ParentJoint.__slots__}, "kind": j.kind.value}
             for j in model.parent_joints
@@ -513,4 +526,5 @@ def _from_contents(contents: dict) -> RobotModel:
         mass=tuple(contents["mass"]),
         inertia_in_link=tuple(tuple(i) for i in contents["inertia_in_link"]),
         inertia_warnings=tuple(contents["inertia_warnings"]),
+        floating_base=contents["floating_base"],
     )

@@ -44,6 +44,50 @@ _CHUNK = 4096  # samples per vectorised pass: bounds the memory of the kernel's 
 
 
 @dataclass(frozen=True)
+class BaseMotion:
+    """The root link's motion, for a robot whose base moves (a legged robot, a mobile manipulator, a
+    robot on a ship): every vector in the root link's frame, each of shape (3,) or (T, 3).
+
+    Attributes:
+        omega: angular velocity, rad/s.
+        alpha: angular acceleration, rad/s^2.
+        velocity: linear velocity of the root link's origin, m/s (only link velocities depend on it;
+            accelerations do not: zeros give velocities relative to the root origin's motion).
+        specific_force: classical linear acceleration of the root link's origin minus gravity,
+            m/s^2: what an accelerometer there reads (a base IMU measures it directly, with no
+            gravity model and no orientation needed).
+    """
+
+    omega: Any
+    alpha: Any
+    velocity: Any
+    specific_force: Any
+
+    def root(self, samples: int | None) -> tuple[Any, ...]:
+        """The recursion's root state (12 values: floats, or (T,) arrays for T samples); checked.
+
+        Raises:
+            InputError: a shape that is neither (3,) nor (samples, 3), or a non-finite value.
+        """
+        values = []
+        for name in ("omega", "alpha", "velocity", "specific_force"):
+            try:
+                array = np.asarray(getattr(self, name), dtype=float)
+            except (TypeError, ValueError) as exc:
+                raise InputError(f"base {name} is not an array of numbers: {exc}") from exc
+            shapes = [(3,)] if samples is None else [(3,), (samples, 3)]
+            if array.shape not in shapes:
+                raise InputError(f"base {name} has shape {array.shape}; expected {' or '.join(map(str, shapes))}")
+            if not np.all(np.isfinite(array)):
+                raise InputError(f"base {name} has a non-finite value")
+            if array.ndim == 1:
+                values.extend(float(v) for v in array)
+            else:
+                values.extend(np.ascontiguousarray(array[:, k]) for k in range(3))
+        return tuple(values)
+
+
+@dataclass(frozen=True)
 class LinkKinematics:
     """Kinematics of every link, indexed like ``RobotModel.link_names`` on axis -2.
 
@@ -112,6 +156,7 @@ def forward_recursion(
     qdd: Any,
     *,
     gravity: Sequence[float] = DEFAULT_GRAVITY,
+    base: BaseMotion | None = None,
 ) -> LinkKinematics:
     """Velocities and accelerations of every link from joint positions, rates and accelerations.
 
@@ -121,10 +166,13 @@ def forward_recursion(
             of ``model.joint_names``; shape (n,) for one sample or (T, n) for T samples computed
             in one vectorised pass. Mimic joints are not columns: they follow their leader.
         gravity: gravity in the root frame (m/s^2); (0, 0, -9.81) for a z-up world. Zeros give
-            pure kinematic accelerations.
+            pure kinematic accelerations. Used for a fixed base only.
+        base: the root link's motion, for a moving base; None: the root is fixed, at rest, and its
+            specific force is -gravity.
 
     Returns:
-        :class:`LinkKinematics` in link frames, with a leading axis of length T for (T, n) inputs.
+        :class:`LinkKinematics` in link frames, with a leading axis of length T for (T, n) inputs;
+        ``position`` and ``rotation`` relative to the root link.
 
     Raises:
         InputError: shapes that do not match the model or each other, or NaN/inf values.
@@ -137,7 +185,8 @@ def forward_recursion(
             check_finite(model, q, qd, qdd)  # names the culprit; a sum can also overflow
     else:
         check_finite(model, q, qd, qdd)
-    table = kinematics_table(model, q, qd, qdd, root_state(gravity=(gx, gy, gz)))
+    root = root_state(gravity=(gx, gy, gz)) if base is None else base.root(None if q.ndim == 1 else q.shape[0])
+    table = kinematics_table(model, q, qd, qdd, root)
     return LinkKinematics.from_table(model.link_names, table)
 
 

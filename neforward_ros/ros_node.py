@@ -32,7 +32,7 @@ from neforward_ros.node.handlers import MessageHandlers
 from neforward_ros.node.pipeline import Pipeline
 from neforward_ros.node.ros_args import ros_args_section
 from neforward_ros.node.settings import DEFAULTS, NODE_NAME, PARAMETERS, command_line_parameters, node_settings
-from neforward_ros.node.topics import JOINT_STATES, JOINT_STATES_ACCEL, ROBOT_DESCRIPTION
+from neforward_ros.node.topics import IMU_TYPE, JOINT_STATES, JOINT_STATES_ACCEL, ODOMETRY_TYPE, ROBOT_DESCRIPTION
 
 OUTPUT_QOS_DEPTH = 10
 
@@ -70,6 +70,9 @@ class NeforwardNode(Node):
             self._raw_subscription(JointTrajectory, JOINT_STATES_ACCEL, self.handlers.on_joint_trajectory, input_qos)
         else:
             self._raw_subscription(JointState, JOINT_STATES, self.handlers.on_joint_state, input_qos)
+        if self.settings.base_source != "fixed":
+            kind = IMU_TYPE if self.settings.base_source == "imu" else ODOMETRY_TYPE
+            self._raw_subscription(get_message(kind), self.settings.base_topic, self.handlers.on_base, input_qos)
         if not self.settings.robot_description:
             latched = QoSProfile(
                 depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE

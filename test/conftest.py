@@ -43,6 +43,7 @@ REQUIREMENTS = {
     "test_demo.py": ("cyclonedds",),
     "test_derivatives_stream.py": ("hypothesis",),
     "test_dynamics.py": ("pinocchio", "scipy"),
+    "test_floating_base.py": ("pinocchio",),
     "test_torques.py": ("pinocchio",),
     "test_pipeline_messages.py": ("scipy", "rosbags", "pinocchio"),
     "test_recursion_pinocchio.py": ("pinocchio",),

@@ -40,10 +40,15 @@ def com_offsets_from_xml(path: Path) -> dict[str, np.ndarray]:
 
 class PinocchioOracle:
     """Pinocchio's model of a URDF; ``unfix``: with every fixed joint made a joint (see unfixed_urdf);
-    ``mimic=False``: mimic joints as independent joints."""
+    ``mimic=False``: mimic joints as independent joints; ``free_flyer``: the root on a free-flyer
+    joint (a floating base: the first 7 entries of q and 6 of v and a are the base's)."""
 
-    def __init__(self, path: Path, unfix: bool = False, mimic: bool = True) -> None:
-        self.model = pin.buildModelFromXML(unfixed_urdf(path) if unfix else path.read_text(), mimic=mimic)
+    def __init__(self, path: Path, unfix: bool = False, mimic: bool = True, free_flyer: bool = False) -> None:
+        text = unfixed_urdf(path) if unfix else path.read_text()
+        if free_flyer:  # the root link on a free-flyer joint: a floating base
+            self.model = pin.buildModelFromXML(text, pin.JointModelFreeFlyer(), mimic=mimic)
+        else:
+            self.model = pin.buildModelFromXML(text, mimic=mimic)
         coms = com_offsets_from_xml(path)
         self.link_frames: dict[str, tuple[int, int]] = {}
         for link, com in coms.items():

@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -393,3 +394,51 @@ def test_use_sim_time_stamps_zero_stamped_input_with_the_clock_topic(start, doma
     stamps = [cdr.decode_multi_dof(b).stamp_ns for b in received["/neforward/link_states"]]
     assert stamps and all(sim + 2 * 10**8 <= s < sim + 4 * 10**8 for s in stamps), stamps
     assert "zero header.stamp" in node.log()
+
+
+def test_a_base_imu_moves_the_quadruped(start, domain) -> None:
+    """base.source imu on the floating-base quadruped: sensor_msgs/Imu from its IMU link over the wire,
+    joint states at their own stamps; the trunk's and the feet's accelerations against the truth."""
+    import importlib.util
+
+    root = Path(__file__).resolve().parent.parent
+    spec = importlib.util.spec_from_file_location("quadruped_trot", root / "examples" / "quadruped_trot.py")
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    urdf = root / "config" / "quadruped.urdf"
+    model = load_model(urdf)
+    node = start("--urdf", str(urdf), "--ros-args", "-p", "base.source:=imu", "-p", "qos_depth:=2000",
+                 "-p", "qos_overrides./neforward/link_states.publisher.depth:=2000")  # fmt: skip
+    peer = Peer(domain)
+    peer.writer("/joint_states", topics.JOINT_STATE_TYPE)
+    peer.writer("/imu", topics.IMU_TYPE)
+    peer.reader("/neforward/link_states", topics.LINK_STATES_TYPE)
+    peer.wait_connected(node)
+    t = np.arange(300) / 200.0  # joint states and IMU messages alternate, 2.5 ms apart
+    q, _, _ = example.legs(t, model.joint_names)
+    t_imu = t + 0.0025
+    kin = forward_recursion(model, *example.legs(t_imu, model.joint_names), base=example.trunk_motion(t_imu))
+    k = model.link_index["imu_link"]
+    received = {"/neforward/link_states": []}
+    for i in range(len(t)):
+        peer.write("/joint_states", joint_state(EPOCH + round(t[i] * 1e9), list(model.joint_names), q[i].tolist()))
+        imu = {
+            "header": {"stamp": time_message(EPOCH + round(t_imu[i] * 1e9)), "frame_id": "imu_link"},
+            "orientation_covariance": [-1.0] + [0.0] * 8,  # no orientation
+            "angular_velocity": dict(zip("xyz", kin.omega[i, k].tolist(), strict=True)),
+            "linear_acceleration": dict(zip("xyz", kin.accel[i, k].tolist(), strict=True)),
+        }
+        peer.write("/imu", imu)
+        time.sleep(0.004)
+        received["/neforward/link_states"] += peer.take("/neforward/link_states")
+    collect(peer, received, lambda r: len(r["/neforward/link_states"]) >= 200, timeout=10.0)
+    points = [cdr.decode_multi_dof(b) for b in received["/neforward/link_states"]]
+    assert len(points) >= 200
+    stamps = (np.array([p.stamp_ns for p in points]) - EPOCH) / 1e9
+    truth = forward_recursion(
+        model, *example.legs(stamps, model.joint_names), base=example.trunk_motion(stamps)
+    ).in_root()
+    got = np.array([p.accelerations[:, :3] for p in points])
+    error = np.sqrt(np.mean((got - truth.accel) ** 2) / np.mean(truth.accel**2))
+    assert error <= 2e-2, error
+    assert "Traceback" not in node.log()

@@ -129,8 +129,8 @@ def test_axis_is_normalised() -> None:
           + revolute("j2", "b", "a")), "child of two joints"),
     (urdf('<link name="a"/><link name="b"/>' + revolute("j1", "a", "b") + revolute("j2", "b", "a")),
      "cycle through links"),
-    (urdf('<link name="a"/><link name="b"/><joint name="fb" type="floating"><parent link="a"/>'
-          '<child link="b"/></joint>'), "joint 'fb' is floating"),
+    (urdf('<link name="a"/><link name="b"/><link name="c"/>' + revolute("j", "a", "b")
+          + '<joint name="fb" type="floating"><parent link="b"/><child link="c"/></joint>'), "joint 'fb' is floating"),
     (urdf('<link name="a"/><link name="b"/><joint name="pl" type="planar"><parent link="a"/><child link="b"/>'
           '<axis xyz="0 0 1"/></joint>'), "joint 'pl' is planar"),
     (urdf('<link name="a"/><link name="b"/><joint name="w" type="wobbly"><parent link="a"/><child link="b"/></joint>'),
@@ -149,6 +149,18 @@ def test_bad_urdf_raises_model_error_naming_the_problem(source: str, message: st
         load_model(source)
     assert message in str(info.value)
     assert isinstance(info.value, NeforwardError) and isinstance(info.value, ValueError)
+
+
+def test_a_floating_joint_below_a_world_link_is_the_base() -> None:
+    model = load_model(
+        urdf(
+            '<link name="world"/><link name="base"/><link name="leg"/><joint name="free" type="floating">'
+            '<parent link="world"/><child link="base"/></joint>' + revolute("hip", "base", "leg")
+        )
+    )
+    assert model.root_link == "base" and model.floating_base == "free"
+    assert model.link_names == ("base", "leg") and model.joint_names == ("hip",)
+    assert load_model(CHAIN).floating_base is None
 
 
 def test_unknown_root_link() -> None:

@@ -9,6 +9,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from neforward_ros.bag.base import BaseAtStamps, base_at, root_states
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.read import Recording
 from neforward_ros.bag.report import Segment
@@ -38,6 +39,9 @@ class States:
         known: (T, n) whether each joint's state is an estimate (or held, under ``hold``).
         efforts: (T, n) the recorded efforts at each stamp (interpolated between a joint's samples),
             NaN where there are none.
+        root: (T, 12) the root's state for a moving base (see :mod:`neforward_ros.bag.base`); None
+            for a fixed base.
+        world_rotation, world_position: (T, 3, 3) root -> world and (T, 3), for a moving base.
     """
 
     stamps: np.ndarray
@@ -47,6 +51,9 @@ class States:
     qdd: np.ndarray
     known: np.ndarray
     efforts: np.ndarray
+    root: np.ndarray | None = None
+    world_rotation: np.ndarray | None = None
+    world_position: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.stamps)
@@ -68,9 +75,12 @@ def results(
     for start in range(0, len(states), chunk):
         part = slice(start, start + chunk)
         q = states.q[part]
-        table = kinematics_table(model, q, states.qd[part], states.qdd[part], root)
+        chunk_root = root if states.root is None else list(states.root[part].T)
+        table = kinematics_table(model, q, states.qd[part], states.qdd[part], chunk_root)
         known = states.known[part]
         result = make_result(model, states.stamps[part], table, model.determined_links(known))
+        if states.world_rotation is not None and options.world_frame:
+            result = replace(result, world=(states.world_rotation[part], states.world_position[part]))
         if options.dynamics_needed:
             force, moment, torques = split_values(model, wrenches_from_table(model, q, table))
             complete = known.all(axis=1)
@@ -170,6 +180,19 @@ def estimate_states(recording: Recording, options: BagOptions, progress: Callabl
         known = np.all(np.isfinite(state), axis=0)
         published = apply_policy(options.publish_policy, *state, known, silent, hold)
         ok = published.publish
+        base = None
+        if recording.base is not None:  # a moving base: its motion at these stamps, from the base topic
+            at = base_at(recording.base, targets, options)
+            link = options.base_link or recording.base.frame_id
+            ok &= at.ok & model.determined_links(published.known)[:, model.link_index[link]]
+            rows = np.flatnonzero(ok)
+            picked = BaseAtStamps(
+                at.ok[rows],
+                *(None if x is None else x[rows] for x in (at.omega, at.alpha, at.specific_force, at.velocity)),
+                at.orientation[rows],
+                at.position[rows],
+            )
+            base = root_states(model, link, published.q[rows], published.qd[rows], published.qdd[rows], picked)
         segment.skipped = int(np.count_nonzero(~ok))
         segment.samples_out = int(np.count_nonzero(ok))
         segment.partial = int(np.count_nonzero(ok & ~published.known.all(axis=1)))
@@ -183,14 +206,15 @@ def estimate_states(recording: Recording, options: BagOptions, progress: Callabl
                 published.qdd[ok],
                 published.known[ok],
                 efforts[ok],
+                *(base if base is not None else (None, None, None)),
             )
         )
     progress("estimating", 1.0)
     if not pieces:
         stamps = np.zeros(0, dtype=np.int64)
         zeros = np.zeros((0, n))
-        pieces = [(stamps, stamps, zeros, zeros, zeros, zeros.astype(bool), zeros)]
-    return States(*(np.concatenate(parts) for parts in zip(*pieces, strict=True)))
+        pieces = [(stamps, stamps, zeros, zeros, zeros, zeros.astype(bool), zeros, None, None, None)]
+    return States(*(None if parts[0] is None else np.concatenate(parts) for parts in zip(*pieces, strict=True)))
 
 
 def _efforts_at(t_ns: np.ndarray, efforts: np.ndarray, targets: np.ndarray) -> np.ndarray:

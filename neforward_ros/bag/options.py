@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from neforward_ros.errors import InputError
 from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW
 from neforward_ros.estimation.stream import DEFAULT_MAX_GAP, VELOCITY_SOURCES
+from neforward_ros.node.base_source import BASE_SOURCES
 from neforward_ros.node.policy import PUBLISH_POLICIES
 from neforward_ros.recursion import DEFAULT_GRAVITY
 
@@ -20,6 +21,8 @@ class BagOptions:
 
     Attributes:
         urdf: URDF file; None takes the model from the recording's robot_description topic.
+        root_link: the link whose frame is the root frame; None: the URDF's root (below a floating
+            joint, its child).
         joint_states_topic: None picks the recording's sensor_msgs/JointState topic.
         storage: output storage, ``mcap`` or ``sqlite3``.
         accel_links, imu_links: links that also get <link>/accel, <link>/twist and <link>/imu.
@@ -37,9 +40,14 @@ class BagOptions:
         effort_scale, effort_offset: joint name -> measured = scale * effort + offset.
         contact_thresholds: joint name -> |external torque| threshold: writes contact.
         contact_debounce: s.
+        base_source: ``fixed``, ``imu`` or ``odometry``: the root's motion from a topic of the recording.
+        base_topic: that topic; None picks the recording's one topic of that type.
+        base_link: the link the source measures; "" for the messages' frame id.
+        world_frame: frame id of world_link_states (a source with orientation); "" for none.
     """
 
     urdf: str | None = None
+    root_link: str | None = None
     joint_states_topic: str | None = None
     storage: str = "mcap"
     accel_links: tuple[str, ...] = ()
@@ -59,6 +67,10 @@ class BagOptions:
     effort_offset: Mapping[str, float] = field(default_factory=dict)
     contact_thresholds: Mapping[str, float] = field(default_factory=dict)
     contact_debounce: float = 0.02
+    base_source: str = "fixed"
+    base_topic: str | None = None
+    base_link: str = ""
+    world_frame: str = ""
 
     @property
     def dynamics_needed(self) -> bool:
@@ -72,6 +84,8 @@ def check_options(options: BagOptions) -> None:
         raise InputError(f"unknown velocity_source {options.velocity_source!r}")
     if options.publish_policy not in PUBLISH_POLICIES:
         raise InputError(f"unknown publish policy {options.publish_policy!r}; choose {', '.join(PUBLISH_POLICIES)}")
+    if options.base_source not in BASE_SOURCES:
+        raise InputError(f"unknown base source {options.base_source!r}; choose {', '.join(BASE_SOURCES)}")
     if options.method not in ("polyfit", "difference"):
         raise InputError(
             f"the bag tool's estimator is polyfit or difference (whole-recording fits), not {options.method!r}: "

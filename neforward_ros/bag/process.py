@@ -67,6 +67,18 @@ def process_bag(
     for link in options.wrench_links:
         if link not in model.link_index:
             raise InputError(f"link {link!r} is not in robot {model.name!r}")
+    if recording.base is not None:
+        link = options.base_link or recording.base.frame_id
+        if link not in model.link_index:
+            raise InputError(
+                f"the base topic {recording.base.topic} measures frame {link!r}, not a link of robot {model.name!r}; "
+                "choose the link with --base-link"
+            )
+    elif model.floating_base:
+        recording.report.notes.append(
+            f"robot {model.name!r} has a floating base (joint {model.floating_base!r}) but no base source was "
+            "given: its root link was taken to be at rest (--base imu or --base odometry for a moving base)"
+        )
     states = estimate_states(recording, options, progress)
     report = recording.report
     report.samples_out = len(states)

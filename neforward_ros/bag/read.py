@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from neforward_ros.bag.base import BaseSamples, read_base
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.report import BagReport
 from neforward_ros.errors import InputError, ModelError
@@ -24,6 +25,7 @@ class Recording:
     stamps: np.ndarray  # (M,) int64 ns, per message
     log_times: np.ndarray  # (M,) int64 ns
     columns: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]  # joint -> (message index, q, v, effort)
+    base: BaseSamples | None = None  # the base topic's samples (a moving base)
 
 
 def read(source: Path, options: BagOptions, progress: Callable[[str, float], None]) -> Recording:
@@ -38,7 +40,7 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
         raise InputError(f"{source} is not a readable rosbag2 recording: {exc}") from exc
     try:
         topic = _joint_states_topic(reader, options.joint_states_topic, source)
-        model = _model(reader, options.urdf)
+        model = _model(reader, options.urdf, options.root_link)
         connections = [c for c in reader.connections if c.topic == topic]
         total = max(sum(c.msgcount for c in connections), 1)
         report = BagReport(joint_states_topic=topic, messages=0)
@@ -55,6 +57,7 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
             raise InputError(f"{source}: corrupt joint state message: {exc}") from exc
         except Exception as exc:  # truncated or corrupt storage
             raise InputError(f"{source} is truncated or corrupt: {type(exc).__name__}: {exc}") from exc
+        base = read_base(reader, options)
         progress("reading", 1.0)
     finally:
         reader.close()
@@ -76,7 +79,7 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
             "nothing could be written; partial writes the links they do not move, hold holds them)"
         )
     report.missing_joints = missing
-    return Recording(model, report, stamps, times, columns)
+    return Recording(model, report, stamps, times, columns, base)
 
 
 def _columns(
@@ -124,9 +127,9 @@ def _joint_states_topic(reader: Any, wanted: str | None, source: Path) -> str:
     return candidates[0]
 
 
-def _model(reader: Any, urdf: str | None) -> RobotModel:
+def _model(reader: Any, urdf: str | None, root_link: str | None = None) -> RobotModel:
     if urdf is not None:
-        return load_model(urdf)
+        return load_model(urdf, root_link=root_link)
     connections = [
         c for c in reader.connections if c.msgtype == topics.STRING_TYPE and c.topic.endswith("robot_description")
     ]
@@ -137,6 +140,6 @@ def _model(reader: Any, urdf: str | None) -> RobotModel:
     if text is None:
         raise InputError("no --urdf given and no robot_description topic in the recording")
     try:
-        return load_model(text)
+        return load_model(text, root_link=root_link)
     except ModelError as exc:
         raise ModelError(f"the recording's robot_description: {exc}") from exc

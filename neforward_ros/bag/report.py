@@ -34,6 +34,7 @@ class BagReport:
     ignored_names: list[str] = field(default_factory=list)
     missing_joints: list[str] = field(default_factory=list)
     contacts: list[tuple[float, float | None]] = field(default_factory=list)  # s since the first joint state
+    notes: list[str] = field(default_factory=list)
     topics: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
@@ -82,6 +83,7 @@ def describe(report: BagReport) -> str:
     for start, end in report.contacts:
         until = f"to {end:.3f} s" if end is not None else "to the end"
         lines.append(f"contact: from {start:.3f} s {until} (since the first joint state)")
+    lines.extend(report.notes)
     if report.missing_joints:
         lines.append(f"joints of the model never in the recording: {', '.join(report.missing_joints)}")
     if report.ignored_names:

@@ -12,10 +12,10 @@ import numpy as np
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.model import RobotModel
 from neforward_ros.node import messages
-from neforward_ros.node.messages import dynamics_messages, per_link_messages
+from neforward_ros.node.messages import dynamics_messages, per_link_messages, world_link_states
 from neforward_ros.node.names import NodeNames
 from neforward_ros.node.result import Result
-from neforward_ros.node.topics import COM_STATES, LINK_STATES, output_list
+from neforward_ros.node.topics import COM_STATES, LINK_STATES, WORLD_LINK_STATES, output_list
 from neforward_ros.wire import cdr
 from neforward_ros.wire.rostypes import facts
 
@@ -30,6 +30,7 @@ def output_topics(options: BagOptions) -> list[tuple[str, str]]:
         options.publish_torques,
         options.wrench_links,
         bool(options.contact_thresholds),
+        bool(options.world_frame) and options.base_source != "fixed",
     )
     return [(names.resolve(o.topic), o.type) for o in outputs]
 
@@ -82,7 +83,8 @@ class RecordingWriter:
                 self._multi_dof, self._templates(result), result.blocks, strict=True
             )
         ]
-        per_sample = bool(options.accel_links or options.imu_links or options.dynamics_needed)
+        world = bool(options.world_frame) and options.base_source != "fixed"
+        per_sample = bool(options.accel_links or options.imu_links or options.dynamics_needed or world)
         if not per_sample and _FAST_MCAP and _write_rows_mcap(self.writer, streams, log_times):
             return
         times = log_times.tolist()
@@ -92,7 +94,10 @@ class RecordingWriter:
                 self.writer.write(connection, log_time, view[i * size : (i + 1) * size])
             if per_sample:
                 sample = result.sample(i)
-                rest = per_link_messages(sample, options.accel_links, options.imu_links, prefix)
+                rest = []
+                if world and sample.world is not None:
+                    rest.append((WORLD_LINK_STATES, world_link_states(sample, options.world_frame, options.gravity)))
+                rest += per_link_messages(sample, options.accel_links, options.imu_links, prefix)
                 rest += dynamics_messages(sample, options.publish_torques, options.wrench_links, prefix)
                 for topic, contents in rest:
                     connection = self.connections[names.resolve(topic)]

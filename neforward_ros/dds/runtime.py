@@ -76,6 +76,9 @@ class DdsNode:
             self._input(JOINT_STATES_ACCEL, topics.JOINT_TRAJECTORY_TYPE, self.handlers.on_joint_trajectory)
         else:
             self._input(JOINT_STATES, topics.JOINT_STATE_TYPE, self.handlers.on_joint_state)
+        if settings.base_source != "fixed":
+            kind = topics.IMU_TYPE if settings.base_source == "imu" else topics.ODOMETRY_TYPE
+            self._input(settings.base_topic, kind, self.handlers.on_base)
         if not settings.robot_description:
             string = topics.STRING_TYPE
             self._reader(ROBOT_DESCRIPTION, string, latched_qos(string), self.handlers.on_description)

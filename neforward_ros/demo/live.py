@@ -82,9 +82,15 @@ def _matched(entity) -> bool:
     return entity.get_subscription_matched_status().current_count > 0
 
 
-def live_demo(seconds: float, urdf: str | None, rate: float = 500.0, estimator: StreamSettings | None = None) -> int:
+def live_demo(
+    seconds: float,
+    urdf: str | None,
+    rate: float = 500.0,
+    estimator: StreamSettings | None = None,
+    root_link: str | None = None,
+) -> int:
     """Run the demo and print its summary; returns the exit code."""
-    run = run_demo(seconds, urdf, rate, estimator, live=sys.stdout.isatty())
+    run = run_demo(seconds, urdf, rate, estimator, live=sys.stdout.isatty(), root_link=root_link)
     run.view.summary(run)
     return 0
 
@@ -119,7 +125,12 @@ class DemoRun:
 
 
 def run_demo(
-    seconds: float, urdf: str | None, rate: float = 500.0, estimator: StreamSettings | None = None, live: bool = False
+    seconds: float,
+    urdf: str | None,
+    rate: float = 500.0,
+    estimator: StreamSettings | None = None,
+    live: bool = False,
+    root_link: str | None = None,
 ) -> DemoRun:
     """The node on loopback DDS, fed for ``seconds``; the outputs gathered (shown live if ``live``)."""
     from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
@@ -135,13 +146,15 @@ def run_demo(
 
     settings = estimator if estimator is not None else StreamSettings()
     path = Path(urdf) if urdf else bundled_config_path(DEFAULT_ROBOT)
-    model = load_model(path)
+    model = load_model(path, root_link=root_link)
     domain = use_loopback()
     node_log = tempfile.NamedTemporaryFile(prefix="neforward-demo-node-", suffix=".log", delete=False)
     command = [sys.executable, "-m", "neforward_ros.cli", "run", "--urdf", str(path)]
     command += ["--ros-args", "-p", f"estimator.method:={settings.method}", "-p", f"estimator.mode:={settings.mode}"]
     if settings.lag is not None:
         command += ["-p", f"estimator.lag:={float(settings.lag)!r}"]
+    if root_link:
+        command += ["-p", f"root_link:={root_link}"]
     node = subprocess.Popen(command, env=os.environ.copy(), stdout=node_log, stderr=subprocess.STDOUT)
     participant = DomainParticipant(domain)
     joint_state = topics.JOINT_STATE_TYPE

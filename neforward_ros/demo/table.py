@@ -18,9 +18,9 @@ def _vector(values: np.ndarray) -> str:
     return "(" + ", ".join(f"{round(float(v), 3) + 0.0:8.3f}" for v in values) + ")"
 
 
-def print_table(urdf: str | None, seconds: float, samples: int) -> None:
+def print_table(urdf: str | None, seconds: float, samples: int, root_link: str | None = None) -> None:
     path = urdf if urdf is not None else bundled_config_path(DEFAULT_ROBOT)
-    model = load_model(path)
+    model = load_model(path, root_link=root_link)
     times = np.linspace(0.0, seconds, samples)
     kin = forward_recursion(model, *demo_trajectory(model, times))
     gravity = ", ".join(f"{g:g}" for g in DEFAULT_GRAVITY)

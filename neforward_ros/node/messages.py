@@ -39,6 +39,7 @@ from neforward_ros.node.topics import (
     LINK_STATES,
     LINK_STATES_TYPE,
     MARKERS,
+    WORLD_LINK_STATES,
     accel_topic,
     imu_topic,
     output_list,
@@ -187,6 +188,46 @@ def markers(result: Result, frame_prefix: str = "", scale: float = 0.02) -> Mess
     return {"markers": out}
 
 
+def world_link_states(result: Result, world_frame: str, gravity: Sequence[float]) -> Message:
+    """trajectory_msgs/MultiDOFJointTrajectory in the world frame (``header.frame_id`` = world_frame),
+    from a moving base's orientation (and position, for odometry): each link's pose in the world,
+    its twist, and its kinematic acceleration (gravity removed: the specific force plus ``gravity``,
+    the world frame's) and alpha, every vector along the world's axes."""
+    assert result.world is not None
+    rotation, origin = result.world
+    (poses, twists, accels) = result.blocks[0]
+    positions = poses[:, :3] @ rotation.T + origin
+    world_quaternion = _quaternion_of(rotation)
+    orientations = np.array([_hamilton(world_quaternion, q) for q in poses[:, 3:]])
+    twists = np.concatenate([twists[:, :3] @ rotation.T, twists[:, 3:] @ rotation.T], axis=1)
+    linear = accels[:, :3] @ rotation.T + np.asarray(gravity, dtype=float)
+    accels = np.concatenate([linear, accels[:, 3:] @ rotation.T], axis=1)
+    message = _multi_dof(result, "", (np.concatenate([positions, orientations], axis=1), twists, accels))
+    message["header"]["frame_id"] = world_frame
+    return message
+
+
+def _quaternion_of(rotation: np.ndarray) -> np.ndarray:
+    from neforward_ros.rotations import quaternions
+
+    return quaternions(rotation[None])[0]
+
+
+def _hamilton(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a * b for quaternions (x, y, z, w), with w >= 0."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    q = np.array(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ]
+    )
+    return q if q[3] >= 0 else -q
+
+
 def joint_torques(result: Result) -> Message:
     """sensor_msgs/JointState: every joint column with its position and velocity (as estimated) and, as
     ``effort``, the torque (N m; N for a prismatic joint) the model says its motor produces."""
@@ -276,6 +317,8 @@ def all_messages(result: Result, settings: NodeSettings) -> list[tuple[str, Mess
     """(topic, contents) of every output of one result, in :func:`output_list` order."""
     prefix = settings.frame_prefix
     out = [(LINK_STATES, link_states(result, prefix)), (COM_STATES, com_states(result, prefix))]
+    if settings.world_frame and result.world is not None:
+        out.append((WORLD_LINK_STATES, world_link_states(result, settings.world_frame, settings.gravity)))
     out += per_link_messages(result, settings.accel_links, settings.imu_links, prefix)
     if settings.publish_markers:
         out.append((MARKERS, markers(result, prefix, settings.marker_scale)))
@@ -321,7 +364,7 @@ class Encoder:
         self.settings = settings
         self._types = {output.topic: output.type for output in output_list(
             settings.accel_links, settings.imu_links, settings.publish_markers, settings.publish_torques,
-            settings.wrench_links, bool(settings.contact_thresholds),
+            settings.wrench_links, bool(settings.contact_thresholds), bool(settings.world_frame),
         )}  # fmt: skip
         self.templates = Templates(settings.frame_prefix)
 
@@ -334,6 +377,9 @@ class Encoder:
             (LINK_STATES, link_template.encode(stamp, *link_blocks)),
             (COM_STATES, com_template.encode(stamp, *com_blocks)),
         ]
+        if settings.world_frame and result.world is not None:
+            world = world_link_states(result, settings.world_frame, settings.gravity)
+            out.append((WORLD_LINK_STATES, cdr.encode(LINK_STATES_TYPE, world)))
         rest = per_link_messages(result, settings.accel_links, settings.imu_links, settings.frame_prefix)
         if settings.publish_markers:
             rest.append((MARKERS, markers(result, settings.frame_prefix, settings.marker_scale)))

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from neforward_ros.base import base_from_link, link_pose
 from neforward_ros.dynamics import split_values, wrenches_from_table
 from neforward_ros.errors import ModelError
 from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator
@@ -22,6 +23,7 @@ from neforward_ros.kernel import kernel_of
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel, load_model
 from neforward_ros.node import messages
+from neforward_ros.node.base_source import Aligner, BaseMessage, BaseTracker, LinkSample, rotation_matrix
 from neforward_ros.node.contact import ContactDetector
 from neforward_ros.node.names import is_token
 from neforward_ros.node.policy import apply_policy, hold_vector
@@ -65,6 +67,10 @@ class Pipeline:
         self._hold = np.zeros(0)
         self._effort_scale = self._effort_offset = np.zeros(0)
         self._contact: ContactDetector | None = None
+        self._aligner: Aligner | None = None
+        if settings.base_source != "fixed":
+            tracker = BaseTracker(settings.base_source, settings.estimator, settings.gravity, log)
+            self._aligner = Aligner(tracker, settings.base_max_delay, log)
         for link in (*settings.accel_links, *settings.imu_links, *settings.wrench_links):
             if not is_token(link):
                 raise ModelError(f"link {link!r} cannot be part of a ROS 2 topic name (letters, digits, _)")
@@ -133,6 +139,14 @@ class Pipeline:
         if settings.dynamics_needed:
             for warning in model.inertia_warnings:
                 self._log.log(logging.WARNING, warning)
+        if model.floating_base and settings.base_source == "fixed":
+            self._log.log(
+                logging.WARNING,
+                f"robot {model.name!r} has a floating base (joint {model.floating_base!r}), but base.source is fixed: "
+                "its root link is taken to be at rest; set base.source to imu or odometry for a moving base",
+            )
+        if settings.base_link and settings.base_link not in model.link_index:
+            self._log.log(logging.ERROR, f"base.link {settings.base_link!r} is not a link of robot {model.name!r}")
         kernel_of(model)  # generate the recursion now, not while the first joint states wait
         self.model = model
         self._estimator = StreamingEstimator(
@@ -170,6 +184,7 @@ class Pipeline:
             settings.publish_torques,
             settings.wrench_links,
             bool(settings.contact_thresholds),
+            bool(settings.world_frame) and settings.base_source != "fixed",
         )
 
     def messages(self, result: Result) -> list[tuple[str, dict[str, Any]]]:
@@ -200,10 +215,29 @@ class Pipeline:
             return []
         try:
             estimates = self._estimator.update(stamp_ns, names, positions, velocities, efforts, receive_ns=receive_ns)
+            if self._aligner is not None:  # each waits for the base motion at its stamp
+                self._aligner.add(estimates)
+                return self._aligned()
             return [r for r in (self._result(e) for e in estimates) if r is not None]
         except Exception as exc:
             self._log.every("internal", logging.ERROR, f"joint state dropped: {type(exc).__name__}: {exc}")
             return []
+
+    def on_base(self, message: BaseMessage) -> list[Result]:
+        """A base sensor_msgs/Imu or nav_msgs/Odometry (``base.source``); returns the results of the
+        joint states it lets out."""
+        if self._aligner is None:
+            return []
+        try:
+            self._aligner.tracker.on_message(message)
+            return self._aligned()
+        except Exception as exc:
+            self._log.every("internal", logging.ERROR, f"base message dropped: {type(exc).__name__}: {exc}")
+            return []
+
+    def _aligned(self) -> list[Result]:
+        assert self._aligner is not None
+        return [r for r in (self._result(e, sample) for e, sample in self._aligner.ready()) if r is not None]
 
     def on_joint_trajectory(
         self,
@@ -280,9 +314,9 @@ class Pipeline:
         )
         return self._result(estimate)
 
-    def _result(self, estimate: JointEstimate) -> Result | None:
+    def _result(self, estimate: JointEstimate, base: LinkSample | None = None) -> Result | None:
         """The recursion on one estimate, under the publish policy (:mod:`.policy`) when some joints
-        have none."""
+        have none; with the base source's sample at its stamp for a moving base."""
         model = self.model
         assert model is not None
         settings = self.settings
@@ -308,11 +342,60 @@ class Pipeline:
                 )
             q, qd, qdd = published.q, published.qd, published.qdd
         # The estimator's and the supplied states are finite by construction: no input checks here.
-        table = kinematics_table(model, q, qd, qdd, root_state(settings.gravity))
+        world = None
+        if base is None:
+            root = root_state(settings.gravity)
+        else:
+            moving = self._base_motion(q, qd, qdd, base, determined)
+            if moving is None:
+                return None
+            root, world = moving
+        table = kinematics_table(model, q, qd, qdd, root)
         result = make_result(model, estimate.stamp_ns, table, determined)
+        if world is not None:
+            result = replace(result, world=world)
         if settings.dynamics_needed and determined is None:
             result = self._with_dynamics(result, estimate, q, qd, table)
         return result
+
+    def _base_motion(
+        self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, sample: LinkSample, determined: np.ndarray | None
+    ) -> tuple[tuple[float, ...], tuple[np.ndarray, np.ndarray] | None] | None:
+        """The root's state from the base source's link motion, and the root's pose in the world
+        (rotation root -> world, position) when the source gives orientation; None (logged) when the
+        measured link is unknown or not determined."""
+        model = self.model
+        assert model is not None and self._aligner is not None
+        link = self.settings.base_link or self._aligner.tracker.frame_id
+        index = model.link_index.get(link)
+        if index is None or (determined is not None and not determined[index]):
+            why = "not a link of the model" if index is None else "a joint above it has no estimate"
+            self._log.every(
+                ("base-link", link),
+                logging.WARNING,
+                f"nothing published: the base source measures link {link!r}, {why} (set base.link)",
+            )
+            return None
+        motion = base_from_link(
+            model,
+            link,
+            q,
+            qd,
+            qdd,
+            omega=sample.omega,
+            alpha=sample.alpha,
+            specific_force=sample.specific_force,
+            velocity=sample.velocity,
+        )
+        world = None
+        if sample.orientation is not None:
+            # root -> world = (link -> world) (link -> root)^T, at these joint states
+            rotation, position = link_pose(model, q, index)
+            world_link = rotation_matrix(sample.orientation)
+            world_root = world_link @ rotation.T
+            origin = np.zeros(3) if sample.position is None else sample.position - world_root @ position
+            world = (world_root, origin)
+        return motion.root(None), world
 
     def _with_dynamics(
         self, result: Result, estimate: JointEstimate, q: np.ndarray, qd: np.ndarray, table: np.ndarray

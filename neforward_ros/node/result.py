@@ -65,6 +65,8 @@ class Result:
             NaN at the samples where some joint has none).
         contact: ~/contact's state at this stamp, when contact thresholds are set and measured (a
             batch's: (T,) floats, 1 or 0, NaN where unknown).
+        world: the root's pose in the world, (rotation root -> world (..., 3, 3), position (..., 3)),
+            when the base source gives orientation (a zero position when it gives none).
     """
 
     stamp_ns: Any
@@ -75,6 +77,7 @@ class Result:
     determined: np.ndarray | None = None
     dynamics: Dynamics | None = None
     contact: Any = None
+    world: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def ids(self) -> tuple[int, ...]:
@@ -121,6 +124,7 @@ class Result:
                     ),
                 ),
                 contact=None if self.contact is None else self.contact[part],
+                world=None if self.world is None else (self.world[0][part], self.world[1][part]),
             )
             out.append((part, run.only(self.determined[start])))
         return out
@@ -149,6 +153,9 @@ class Result:
         contact = None
         if self.contact is not None and np.isfinite(self.contact[index]):
             contact = bool(self.contact[index])
+        world = None
+        if self.world is not None and np.isfinite(self.world[0][index]).all():
+            world = (self.world[0][index], self.world[1][index])
         sample = replace(
             self,
             stamp_ns=int(self.stamp_ns[index]),
@@ -156,6 +163,7 @@ class Result:
             determined=None,
             dynamics=dynamics,
             contact=contact,
+            world=world,
         )
         if "blocks" in self.__dict__:
             sample.__dict__["blocks"] = tuple(tuple(b[index] for b in blocks) for blocks in self.blocks)

@@ -25,6 +25,7 @@ from neforward_ros.estimation.stream import (
     VELOCITY_SOURCES,
     StreamSettings,
 )
+from neforward_ros.node.base_source import BASE_SOURCES
 from neforward_ros.node.policy import PUBLISH_POLICIES
 from neforward_ros.node.ros_args import RosArgs, parse_ros_args
 from neforward_ros.recursion import DEFAULT_GRAVITY
@@ -152,6 +153,32 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter(
         "contact.debounce", "double", 0.02, "s a change (contact or none) must last before ~/contact follows it."
     ),
+    Parameter(
+        "base.source",
+        "string",
+        "fixed",
+        "The base's motion: fixed (at rest; gravity in the root frame), imu (sensor_msgs/Imu on base.topic) or "
+        "odometry (nav_msgs/Odometry on base.topic).",
+    ),
+    Parameter("base.topic", "string", "", "The base source's topic. Empty: imu, or odom for odometry."),
+    Parameter(
+        "base.link",
+        "string",
+        "",
+        "The link the base source measures (IMU frame, odometry child frame). Empty: the message's frame id.",
+    ),
+    Parameter(
+        "base.max_delay",
+        "double",
+        0.5,
+        "s a joint state waits for the base motion at its stamp before it is dropped with a warning.",
+    ),
+    Parameter(
+        "world_frame",
+        "string",
+        "",
+        "With a base source that gives orientation: frame id of ~/world_link_states. Empty: not published.",
+    ),
     Parameter("accel_links", "string[]", [], "Links that get ~/<link>/accel and ~/<link>/twist (link frame)."),
     Parameter("imu_links", "string[]", [], "Links that get a virtual IMU, ~/<link>/imu (sensor_msgs/Imu)."),
     Parameter("publish_markers", "bool", False, "Publish ~/markers: an arrow per link for its COM acceleration."),
@@ -205,6 +232,11 @@ class NodeSettings:
         wrench_links: links with ~/<link>/wrench.
         contact_thresholds: joint name -> |external torque| threshold; empty: no ~/contact.
         contact_debounce: s.
+        base_source: "fixed", "imu" or "odometry".
+        base_topic: its topic (relative name).
+        base_link: the link it measures, or "" for the message's frame id.
+        base_max_delay: s.
+        world_frame: frame id of ~/world_link_states, or "" for none.
         accel_links, imu_links: links with per-link topics.
         publish_markers: whether ~/markers is published.
         marker_scale: m per m/s^2.
@@ -226,6 +258,11 @@ class NodeSettings:
     wrench_links: tuple[str, ...] = ()
     contact_thresholds: Mapping[str, float] = field(default_factory=dict)
     contact_debounce: float = 0.02
+    base_source: str = "fixed"
+    base_topic: str = ""
+    base_link: str = ""
+    base_max_delay: float = 0.5
+    world_frame: str = ""
     accel_links: tuple[str, ...] = ()
     imu_links: tuple[str, ...] = ()
     publish_markers: bool = False
@@ -270,6 +307,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         ("velocity_source", VELOCITY_SOURCES),
         ("acceleration_source", ACCELERATION_SOURCES),
         ("publish_policy", PUBLISH_POLICIES),
+        ("base.source", BASE_SOURCES),
         ("estimator.method", METHODS),
     ):
         if merged[name] not in choices:
@@ -286,6 +324,10 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
     contact_thresholds = _per_joint(merged, "contact.joint_names", "contact.thresholds")
     if any(not v > 0.0 for v in contact_thresholds.values()):
         raise InputError("parameter contact.thresholds must hold positive numbers")
+    if not merged["base.max_delay"] > 0.0:
+        raise InputError(
+            f"parameter base.max_delay must be a positive number of seconds, got {merged['base.max_delay']}"
+        )
     if not merged["contact.debounce"] >= 0.0:
         raise InputError(f"parameter contact.debounce must be at least 0 s, got {merged['contact.debounce']}")
     lag = merged["estimator.lag"]
@@ -322,6 +364,11 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         wrench_links=tuple(merged["wrench_links"]),
         contact_thresholds=contact_thresholds,
         contact_debounce=merged["contact.debounce"],
+        base_source=merged["base.source"],
+        base_topic=merged["base.topic"] or {"imu": "imu", "odometry": "odom"}.get(merged["base.source"], ""),
+        base_link=merged["base.link"],
+        base_max_delay=merged["base.max_delay"],
+        world_frame=merged["world_frame"],
         accel_links=tuple(merged["accel_links"]),
         imu_links=tuple(merged["imu_links"]),
         publish_markers=merged["publish_markers"],

@@ -14,6 +14,7 @@ MARKERS = "~/markers"
 JOINT_TORQUES = "~/joint_torques"
 EXTERNAL_TORQUES = "~/external_torques"
 CONTACT = "~/contact"
+WORLD_LINK_STATES = "~/world_link_states"
 
 
 LINK_STATES_TYPE = "trajectory_msgs/msg/MultiDOFJointTrajectory"
@@ -26,6 +27,8 @@ JOINT_TRAJECTORY_TYPE = "trajectory_msgs/msg/JointTrajectory"
 STRING_TYPE = "std_msgs/msg/String"
 WRENCH_TYPE = "geometry_msgs/msg/WrenchStamped"
 BOOL_TYPE = "std_msgs/msg/Bool"
+IMU_INPUT_TYPE = IMU_TYPE
+ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
 
 
 @dataclass(frozen=True)
@@ -43,10 +46,13 @@ def output_list(
     publish_torques: bool = False,
     wrench_links: Sequence[str] = (),
     contact: bool = False,
+    world: bool = False,
 ) -> list[Output]:
-    """The node's outputs, relative names: link_states, com_states, per-link topics, markers, joint
-    torques, external torques, per-link wrenches, contact."""
+    """The node's outputs, relative names: link_states, com_states, world_link_states, per-link topics,
+    markers, joint torques, external torques, per-link wrenches, contact."""
     out = [Output(LINK_STATES, LINK_STATES_TYPE), Output(COM_STATES, LINK_STATES_TYPE)]
+    if world:
+        out.append(Output(WORLD_LINK_STATES, LINK_STATES_TYPE))
     for link in accel_links:
         out += [Output(accel_topic(link), ACCEL_TYPE), Output(twist_topic(link), TWIST_TYPE)]
     out += [Output(imu_topic(link), IMU_TYPE) for link in imu_links]
