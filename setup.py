@@ -33,6 +33,8 @@ setup(
             "matplotlib>=3.6",
             "ruff>=0.6",
             "catkin_pkg>=1.0",
+            "distributed>=2024.1",
+            "xacro>=2.0",
         ],
     },
     zip_safe=True,
@@ -43,6 +45,6 @@ setup(
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={
-        "console_scripts": ["neforward = neforward_ros.cli:main", "neforward_node = neforward_ros.node_entry:main"]
+        "console_scripts": ["neforward = neforward_ros.cli:entry", "neforward_node = neforward_ros.node_entry:main"]
     },
 )

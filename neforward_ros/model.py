@@ -168,7 +168,8 @@ def load_model(source: str | os.PathLike[str], *, root_link: str | None = None) 
     Args:
         source: a URDF file path, or the URDF XML text itself (what a ``robot_description``
             parameter or topic holds). A string whose first non-blank character is ``<`` is
-            taken as XML.
+            taken as XML. A ``.xacro`` file (or one declaring the xacro namespace) is expanded
+            with the ``xacro`` package first. A ``<robot>`` without a name is named ``robot``.
         root_link: the link whose frame is the root frame; the recursion covers the subtree
             below it and treats it as fixed in the inertial frame. Default: the URDF's root link.
 
@@ -176,7 +177,9 @@ def load_model(source: str | os.PathLike[str], *, root_link: str | None = None) 
         ModelError: the file is missing, the XML is malformed, the URDF is not a single tree
             (cycles, several roots, a link with two parents, unknown links), a joint is floating
             or planar or has a zero axis, a mimic joint follows an unknown or fixed joint, or
-            ``root_link`` is not a link of the URDF.
+            ``root_link`` is not a link of the URDF, a xacro file that cannot be expanded (or
+            the ``xacro`` package is missing: the message says how to expand it), or XML text
+            that is unexpanded xacro.
     """
     xml_bytes = _read_source(source)
     stored = disk_cache.load("models", xml_bytes, root_link or "")
@@ -201,6 +204,10 @@ def require_urdf_parser() -> None:
 
 def _read_source(source: str | os.PathLike[str]) -> bytes:
     if isinstance(source, str) and source.lstrip().startswith("<"):
+        if _XACRO_NAMESPACE in source:
+            raise ModelError(
+                "the URDF text is an unexpanded xacro file: expand it first (xacro robot.urdf.xacro > robot.urdf)"
+            )
         return source.encode("utf-8")
     if not isinstance(source, (str, os.PathLike)):
         raise ModelError(f"URDF source must be a path or an XML string, not {type(source).__name__}")
@@ -209,9 +216,32 @@ def _read_source(source: str | os.PathLike[str]) -> bytes:
         raise ModelError("URDF source is empty: give a file path or the URDF XML text")
     try:
         with open(path, "rb") as stream:
-            return stream.read()
+            contents = stream.read()
     except OSError as exc:
         raise ModelError(f"cannot read URDF file {path!r}: {exc.strerror or exc}") from exc
+    if path.endswith(".xacro") or _XACRO_NAMESPACE.encode() in contents:
+        return _expand_xacro(path)
+    return contents
+
+
+_XACRO_NAMESPACE = "http://www.ros.org/wiki/xacro"
+
+
+def _expand_xacro(path: str) -> bytes:
+    """The URDF a xacro file expands to (with the xacro package, as ROS 2 launch files do)."""
+    try:
+        import xacro
+    except ImportError as exc:
+        raise ModelError(
+            f"{path} is a xacro file: install xacro to read it directly (pip install xacro), "
+            f"or expand it first: xacro {path} > robot.urdf"
+        ) from exc
+    try:
+        return xacro.process_file(path).toxml().encode("utf-8")
+    except BaseException as exc:  # xacro raises its own errors, and SystemExit on some
+        if isinstance(exc, KeyboardInterrupt):
+            raise
+        raise ModelError(f"xacro could not expand {path}: {exc}") from exc
 
 
 def _parse_urdf(xml_bytes: bytes):  # -> yourdfpy.Robot
@@ -223,6 +253,9 @@ def _parse_urdf(xml_bytes: bytes):  # -> yourdfpy.Robot
         raise ModelError(f"malformed URDF XML: {exc}") from exc
     if root.tag != "robot":
         raise ModelError(f"not a URDF: the root element is <{root.tag}>, expected <robot>")
+    if not root.get("name"):  # optional for urdfdom and Pinocchio (example-robot-data's ur3.urdf has none)
+        root.set("name", "robot")
+        xml_bytes = ElementTree.tostring(root)
 
     import yourdfpy  # imported here: it pulls in trimesh, which only model loading needs
 

@@ -32,12 +32,19 @@ OPTIONAL = {
     "scipy": "pip install scipy (a test extra)",
     "pinocchio": "pip install pin (Pinocchio, the test oracle; a test extra)",
     "catkin_pkg": "pip install catkin_pkg (a test extra)",
+    "matplotlib": "pip install matplotlib (the plot extra)",
+    "distributed": "pip install 'dask[distributed]' (a test extra: the fleet recipe on a Dask cluster)",
 }
 
 
 # What each test module needs beyond the package's core (numpy, yourdfpy, PyYAML).
 REQUIREMENTS = {
     "test_bag.py": ("rosbags", "pinocchio"),
+    "test_bag_options.py": ("rosbags", "pinocchio"),
+    "test_bag_plot.py": ("matplotlib",),
+    "test_fleet.py": ("rosbags", "pinocchio"),
+    "test_interrupts.py": ("rosbags", "pinocchio"),
+    "test_play.py": ("cyclonedds", "rosbags", "pinocchio"),
     "test_cdr.py": ("hypothesis", "rosbags"),
     "test_dds_node.py": ("cyclonedds", "rosbags"),
     "test_demo.py": ("cyclonedds",),

@@ -15,14 +15,47 @@ from neforward_ros.resources import bundled_config_path
 from conftest import CONFIG_DIR, TEST_ROBOTS, require
 
 
-def test_demo_prints_every_link_of_the_bundled_robot(capsys) -> None:
+def test_table_prints_every_link_of_the_bundled_robot(capsys, monkeypatch) -> None:
+    monkeypatch.setenv("COLUMNS", "160")  # wide enough for the four vectors on one line
     assert main(["table", "--samples", "2"]) == 0
     out = capsys.readouterr().out
-    assert "13 links, 8 joints" in out
+    assert out.startswith("neforward table: robot 'panda'") and "13 links, 8 joints" in out
     for link in ("panda_link0", "panda_hand", "panda_leftfinger", "panda_rightfinger", "panda_tcp"):
         assert out.count(f"\n{link} ") == 2
     # The fixed base reads gravity alone: +9.81 m/s^2 along its z axis, origin and COM alike.
     assert "(   0.000,    0.000,    0.000)  (   0.000,    0.000,    0.000)  (   0.000,    0.000,    9.810)" in out
+
+
+@pytest.mark.parametrize("columns", [100, 120])
+def test_table_fits_the_terminal(capsys, monkeypatch, columns) -> None:
+    monkeypatch.setenv("COLUMNS", str(columns))
+    assert main(["table", "--samples", "2"]) == 0
+    out = capsys.readouterr().out
+    assert max(len(line) for line in out.splitlines()) <= columns
+    for link in ("panda_link0", "panda_tcp"):  # in two blocks of two vectors
+        assert out.count(f"\n{link} ") == 4
+    assert "accel [m/s^2]" in out and "omega [rad/s]" in out
+
+
+def test_help_version_and_defaults() -> None:
+    def run(*arguments: str) -> str:
+        done = subprocess.run(
+            [sys.executable, "-m", "neforward_ros.cli", *arguments], capture_output=True, text=True, check=True
+        )
+        return done.stdout
+
+    assert "``" not in run("--help")
+    assert run("--version").startswith("neforward ")
+    demo = " ".join(run("demo", "--help").split())
+    assert "(default: 500.0)" in demo and "(default: polyfit)" in demo
+    bag = " ".join(run("bag", "--help").split())
+    assert "-p NAME:=VALUE" in bag and "--params FILE" in bag
+    # the bag flags that stand for node parameters show the node's defaults
+    from neforward_ros.node.settings import DEFAULTS
+
+    assert f"(default: {' '.join(f'{g:g}' for g in DEFAULTS['gravity'])})" in bag
+    for name in ("estimator.method", "estimator.mode", "publish_policy", "base.source", "contact.debounce"):
+        assert f"{name}" in bag and f"(default: {DEFAULTS[name]})" in bag, name
 
 
 def test_demo_on_planar_arm_matches_hand_computation(capsys) -> None:

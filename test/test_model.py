@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import importlib.util
 
 import numpy as np
 import pytest
 
 from neforward_ros import InputError, ModelError, NeforwardError, forward_recursion, load_model
 
-from conftest import TEST_ROBOTS
+from conftest import CONFIG_DIR, TEST_ROBOTS
 
 
 def urdf(body: str, name: str = "r") -> str:
@@ -256,3 +257,30 @@ def test_a_cached_model_needs_no_urdf_parser(tmp_path) -> None:
         [sys.executable, "-c", code], env={**environment, "NEFORWARD_CACHE": "off"}, capture_output=True, text=True
     )
     assert off.stdout.strip() == "True"
+
+
+def test_a_urdf_without_a_robot_name_loads_as_urdfdom_and_pinocchio_load_it() -> None:
+    """example-robot-data's ur3.urdf has no name attribute on <robot>."""
+    text = (CONFIG_DIR / "panda.urdf").read_text().replace('<robot name="panda"', "<robot", 1)
+    assert '<robot name="panda"' not in text
+    model = load_model(text)
+    assert model.name == "robot" and len(model.link_names) == 13
+
+
+def test_xacro_files_are_expanded_or_refused_with_a_hint(tmp_path) -> None:
+    source = (
+        '<robot name="x" xmlns:xacro="http://www.ros.org/wiki/xacro"><xacro:property name="L" value="0.5"/>'
+        '<link name="a"/><link name="b"/><joint name="j" type="revolute"><parent link="a"/><child link="b"/>'
+        '<origin xyz="0 0 ${L}"/><axis xyz="0 0 1"/><limit lower="0" upper="1" effort="1" velocity="1"/>'
+        "</joint></robot>"
+    )
+    path = tmp_path / "arm.urdf.xacro"
+    path.write_text(source)
+    if importlib.util.find_spec("xacro") is not None:
+        model = load_model(path)
+        assert model.parent_joints[1].origin_xyz[2] == pytest.approx(0.5)
+    else:
+        with pytest.raises(ModelError, match="pip install xacro"):
+            load_model(path)
+    with pytest.raises(ModelError, match="unexpanded xacro"):
+        load_model(source)  # text (a robot_description) that nobody expanded

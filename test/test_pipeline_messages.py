@@ -196,6 +196,7 @@ def test_missing_joints_and_bad_supplied_points_are_logged_not_raised() -> None:
         log=lambda level, message: lines.append(message),
     )
     assert any("does not have: nope" in line for line in lines)
+    assert not [o for o in pipeline.outputs() if "nope" in o.topic]  # not announced, not published
     names = list(pipeline.model.joint_names)
     out = []
     for k in range(10):  # the gripper driver never publishes

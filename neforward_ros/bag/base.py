@@ -20,7 +20,6 @@ from neforward_ros.base import base_from_link
 from neforward_ros.errors import InputError
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.coverage import covered_mask
-from neforward_ros.estimation.stream import StreamSettings
 from neforward_ros.kernel import SLICES
 from neforward_ros.model import RobotModel
 from neforward_ros.node import topics
@@ -56,17 +55,21 @@ def read_base(reader: Any, options: BagOptions) -> BaseSamples | None:
     Raises:
         InputError: no such topic in the recording (the message lists what there is), or no usable sample.
     """
-    if options.base_source == "fixed":
+    settings = options.settings
+    if settings.base_source == "fixed":
         return None
-    kind = topics.IMU_TYPE if options.base_source == "imu" else topics.ODOMETRY_TYPE
+    kind = topics.IMU_TYPE if settings.base_source == "imu" else topics.ODOMETRY_TYPE
     available = {c.topic: c.msgtype for c in reader.connections}
     topic = options.base_topic
     if topic is None:
         candidates = sorted(name for name, msgtype in available.items() if msgtype == kind)
+        named = "/" + settings.base_topic.lstrip("/")  # the node's base.topic, in the root namespace
+        if len(candidates) > 1 and named in candidates:
+            candidates = [named]
         if len(candidates) != 1:
             listing = ", ".join(f"{n} ({t})" for n, t in sorted(available.items())) or "none"
             raise InputError(
-                f"--base {options.base_source} needs one {kind} topic (--base-topic to choose); topics: {listing}"
+                f"--base {settings.base_source} needs one {kind} topic (--base-topic to choose); topics: {listing}"
             )
         topic = candidates[0]
     if available.get(topic) != kind:
@@ -78,7 +81,7 @@ def read_base(reader: Any, options: BagOptions) -> BaseSamples | None:
     for connection, _, raw in reader.messages(connections=[c for c in reader.connections if c.topic == topic]):
         m = store.deserialize_cdr(raw, connection.msgtype)
         stamp = m.header.stamp.sec * NS + m.header.stamp.nanosec
-        if options.base_source == "imu":
+        if settings.base_source == "imu":
             q = m.orientation
             has_orientation = m.orientation_covariance[0] != -1.0
             row = (
@@ -133,29 +136,31 @@ class BaseAtStamps:
 
 def base_at(base: BaseSamples, targets_ns: np.ndarray, options: BagOptions) -> BaseAtStamps:
     """The base motion at the targets (see the module docstring)."""
+    settings = options.settings
     origin = int(min(base.stamps[0], targets_ns.min()))
     t = (base.stamps - origin) / NS
     targets = (targets_ns - origin) / NS
-    support = StreamSettings(method=options.method, window=options.window, order=options.order).support
+    batch = options.batch_estimator
+    support = batch.support
     after = np.clip(np.searchsorted(t, targets), 1, len(t) - 1)
     ok = covered_mask(t, targets, support) & (targets >= t[0]) & (targets <= t[-1])
-    ok &= t[after] - t[after - 1] <= options.max_gap
+    ok &= t[after] - t[after - 1] <= settings.estimator.max_gap
 
     def interpolate(values: np.ndarray) -> np.ndarray:
         return np.stack([np.interp(targets, t, values[:, k]) for k in range(values.shape[1])], axis=1)
 
     omega = interpolate(base.omega)
-    _, alpha, _ = estimate_at(t, base.omega, targets, method=options.method, window=options.window, order=options.order)
+    _, alpha, _ = estimate_at(t, base.omega, targets, method=batch.method, window=batch.window, order=batch.order)
     orientation = _nlerp(t, base.orientation, targets)
     position = interpolate(base.position)
-    if options.base_source == "imu":
+    if settings.base_source == "imu":
         return BaseAtStamps(ok, omega, alpha, interpolate(base.linear), None, orientation, position)
     velocity = interpolate(base.linear)
     _, acceleration, _ = estimate_at(
-        t, base.linear, targets, method=options.method, window=options.window, order=options.order
+        t, base.linear, targets, method=batch.method, window=batch.window, order=batch.order
     )
     ok &= np.isfinite(orientation).all(axis=1)
-    gravity = np.asarray(options.gravity, dtype=float)
+    gravity = np.asarray(settings.gravity, dtype=float)
     gravity_in_link = np.array(
         [rotation_matrix(q).T @ gravity if np.isfinite(q).all() else np.full(3, np.nan) for q in orientation]
     )

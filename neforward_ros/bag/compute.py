@@ -16,7 +16,7 @@ from neforward_ros.bag.report import Segment
 from neforward_ros.dynamics import split_values, wrenches_from_table
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.coverage import covered_mask
-from neforward_ros.estimation.stream import StreamSettings
+from neforward_ros.estimation.stream import StreamingEstimator, StreamSettings
 from neforward_ros.logs import ThrottledLog
 from neforward_ros.model import RobotModel
 from neforward_ros.node.contact import ContactDetector
@@ -64,14 +64,15 @@ def results(
 ) -> Iterator[tuple[Result, np.ndarray]]:
     """(result, recording times) of consecutive chunks of the samples, each from one batched recursion
     (and, when the options ask for torques, wrenches or contact, one batched backward pass)."""
-    root = root_state(options.gravity)
+    settings = options.settings
+    root = root_state(settings.gravity)
     chunk = CHUNK if chunk is None else chunk
-    scale = np.array([options.effort_scale.get(n, 1.0) for n in model.joint_names])
-    offset = np.array([options.effort_offset.get(n, 0.0) for n in model.joint_names])
+    scale = np.array([settings.effort_scale.get(n, 1.0) for n in model.joint_names])
+    offset = np.array([settings.effort_offset.get(n, 0.0) for n in model.joint_names])
     detector = None
-    if options.contact_thresholds:
-        thresholds = np.array([options.contact_thresholds.get(n, np.nan) for n in model.joint_names])
-        detector = ContactDetector(thresholds, options.contact_debounce, model.joint_names, ThrottledLog())
+    if settings.contact_thresholds:
+        thresholds = np.array([settings.contact_thresholds.get(n, np.nan) for n in model.joint_names])
+        detector = ContactDetector(thresholds, settings.contact_debounce, model.joint_names, ThrottledLog())
     for start in range(0, len(states), chunk):
         part = slice(start, start + chunk)
         q = states.q[part]
@@ -79,7 +80,7 @@ def results(
         table = kinematics_table(model, q, states.qd[part], states.qdd[part], chunk_root)
         known = states.known[part]
         result = make_result(model, states.stamps[part], table, model.determined_links(known))
-        if states.world_rotation is not None and options.world_frame:
+        if states.world_rotation is not None and settings.world_frame:
             result = replace(result, world=(states.world_rotation[part], states.world_position[part]))
         if options.dynamics_needed:
             force, moment, torques = split_values(model, wrenches_from_table(model, q, table))
@@ -118,10 +119,9 @@ def estimate_states(recording: Recording, options: BagOptions, progress: Callabl
     than max_gap away; the publish policy (:mod:`neforward_ros.node.policy`) then says what is
     written for stamps where some joints have none.
     """
+    settings = options.settings
     model = recording.model
-    wrap = model.continuous_columns
-    support = StreamSettings(method=options.method, window=options.window, order=options.order).support
-    hold = hold_vector(model.joint_names, options.hold_positions)
+    hold = hold_vector(model.joint_names, settings.hold_positions)
     n = len(model.joint_names)
     pieces: list[tuple[np.ndarray, ...]] = []
     ranges = _segments(recording)
@@ -131,59 +131,19 @@ def estimate_states(recording: Recording, options: BagOptions, progress: Callabl
         segment = Segment(int(segment_stamps.min()), int(segment_stamps.max()), stop - start)
         recording.report.segments.append(segment)
         targets, first = np.unique(segment_stamps, return_index=True)
-        origin = int(targets[0])
-        target_s = (targets - origin) / NS
-        state = np.full((3, len(targets), n), np.nan)
-        efforts = np.full((len(targets), n), np.nan)
-        # As the node, which emits an estimate once a message about `after` later arrives (half an
-        # interval early, for jitter) and has none for the last stretch of a stream.
-        early = 0.5 * float(np.median(np.diff(target_s))) if len(target_s) > 1 else 0.0
-        reached = target_s + support.after <= target_s[-1] + early
-        silent = np.ones((len(targets), n), dtype=bool)
-        # Each joint's own samples; joints with the same sample times and kind are estimated together.
-        groups: dict[tuple[bytes, bool], list[tuple[int, np.ndarray, np.ndarray]]] = {}
-        absent = []
-        for j, (rows, qs, vs, es) in recording.columns.items():
-            inside = (rows >= start) & (rows < stop) & np.isfinite(qs)
-            t_ns, keep = np.unique(recording.stamps[rows[inside]], return_index=True)
-            efforts[:, j] = _efforts_at(t_ns, es[inside][keep], targets)
-            if len(t_ns) < support.min_samples:
-                absent.append(model.joint_names[j])
-                continue
-            q = qs[inside][keep]
-            if wrap[j]:
-                q = np.unwrap(q)
-            v = vs[inside][keep]
-            use_velocity = options.velocity_source != "differentiate" and bool(np.all(np.isfinite(v)))
-            groups.setdefault((t_ns.tobytes(), use_velocity), []).append((j, q, v))
-        absent += [model.joint_names[j] for j in range(n) if j not in recording.columns]
+        if options.streamed:
+            state, efforts, silent, absent = _replayed(recording, start, stop, targets, settings.estimator)
+        else:
+            state, efforts, silent, absent = _whole(recording, start, stop, targets, options)
         if absent:
-            segment.note = f"too few samples of {', '.join(sorted(set(absent)))} for an estimate"
-        for (t_bytes, use_velocity), members in groups.items():
-            t = (np.frombuffer(t_bytes, dtype=np.int64) - origin) / NS
-            joints = [j for j, _, _ in members]
-            q_at, qd_at, qdd_at = estimate_at(
-                t,
-                np.stack([q for _, q, _ in members], axis=1),
-                target_s,
-                velocity=np.stack([v for _, _, v in members], axis=1) if use_velocity else None,
-                method=options.method,
-                window=options.window,
-                order=options.order,
-            )
-            stale = _gap_to_samples(t, target_s) > options.max_gap
-            silent[:, joints] = stale[:, None]
-            unready = stale | ~covered_mask(t, target_s, support, _end_slack(t)) | ~reached
-            for column, values in enumerate((q_at, qd_at, qdd_at)):
-                values[unready] = np.nan
-                state[column][:, joints] = values
+            segment.note = f"too few samples of {', '.join(absent)} for an estimate"
         known = np.all(np.isfinite(state), axis=0)
-        published = apply_policy(options.publish_policy, *state, known, silent, hold)
+        published = apply_policy(settings.publish_policy, *state, known, silent, hold)
         ok = published.publish
         base = None
         if recording.base is not None:  # a moving base: its motion at these stamps, from the base topic
             at = base_at(recording.base, targets, options)
-            link = options.base_link or recording.base.frame_id
+            link = settings.base_link or recording.base.frame_id
             ok &= at.ok & model.determined_links(published.known)[:, model.link_index[link]]
             rows = np.flatnonzero(ok)
             picked = BaseAtStamps(
@@ -215,6 +175,120 @@ def estimate_states(recording: Recording, options: BagOptions, progress: Callabl
         zeros = np.zeros((0, n))
         pieces = [(stamps, stamps, zeros, zeros, zeros, zeros.astype(bool), zeros, None, None, None)]
     return States(*(None if parts[0] is None else np.concatenate(parts) for parts in zip(*pieces, strict=True)))
+
+
+def _whole(
+    recording: Recording, start: int, stop: int, targets: np.ndarray, options: BagOptions
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """One segment's (q, qd, qdd) (3, T, n), efforts (T, n), silent (T, n) and the joints with too few
+    samples, from the whole-recording estimator at the stamps ``targets``."""
+    model, settings = recording.model, options.settings
+    n = len(model.joint_names)
+    wrap = model.continuous_columns
+    batch = options.batch_estimator
+    support = batch.support
+    origin = int(targets[0])
+    target_s = (targets - origin) / NS
+    state = np.full((3, len(targets), n), np.nan)
+    efforts = np.full((len(targets), n), np.nan)
+    # As the node, which emits an estimate once a message about `after` later arrives (half an
+    # interval early, for jitter) and has none for the last stretch of a stream.
+    early = 0.5 * float(np.median(np.diff(target_s))) if len(target_s) > 1 else 0.0
+    reached = target_s + support.after <= target_s[-1] + early
+    silent = np.ones((len(targets), n), dtype=bool)
+    # Each joint's own samples; joints with the same sample times and kind are estimated together.
+    groups: dict[tuple[bytes, bool], list[tuple[int, np.ndarray, np.ndarray]]] = {}
+    absent = []
+    for j, (rows, qs, vs, es) in recording.columns.items():
+        inside = (rows >= start) & (rows < stop) & np.isfinite(qs)
+        t_ns, keep = np.unique(recording.stamps[rows[inside]], return_index=True)
+        efforts[:, j] = _efforts_at(t_ns, es[inside][keep], targets)
+        if len(t_ns) < support.min_samples:
+            absent.append(model.joint_names[j])
+            continue
+        q = qs[inside][keep]
+        if wrap[j]:
+            q = np.unwrap(q)
+        v = vs[inside][keep]
+        use_velocity = settings.estimator.velocity_source != "differentiate" and bool(np.all(np.isfinite(v)))
+        groups.setdefault((t_ns.tobytes(), use_velocity), []).append((j, q, v))
+    absent += [model.joint_names[j] for j in range(n) if j not in recording.columns]
+    for (t_bytes, use_velocity), members in groups.items():
+        t = (np.frombuffer(t_bytes, dtype=np.int64) - origin) / NS
+        joints = [j for j, _, _ in members]
+        q_at, qd_at, qdd_at = estimate_at(
+            t,
+            np.stack([q for _, q, _ in members], axis=1),
+            target_s,
+            velocity=np.stack([v for _, _, v in members], axis=1) if use_velocity else None,
+            method=batch.method,
+            window=batch.window,
+            order=batch.order,
+        )
+        stale = _gap_to_samples(t, target_s) > settings.estimator.max_gap
+        silent[:, joints] = stale[:, None]
+        unready = stale | ~covered_mask(t, target_s, support, _end_slack(t)) | ~reached
+        for column, values in enumerate((q_at, qd_at, qdd_at)):
+            values[unready] = np.nan
+            state[column][:, joints] = values
+    return state, efforts, silent, sorted(set(absent))
+
+
+def _replayed(
+    recording: Recording, start: int, stop: int, targets: np.ndarray, estimator: StreamSettings
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """As :func:`_whole`, by replaying the segment's messages through the node's streaming estimator
+    (causal mode, another lag, kalman): each stamp gets exactly what the node would have published."""
+    model = recording.model
+    n = len(model.joint_names)
+    count = stop - start
+    q, v, e = (np.full((count, n), np.nan) for _ in range(3))
+    present = np.zeros((count, n), dtype=bool)
+    for j, (rows, qs, vs, es) in recording.columns.items():
+        inside = (rows >= start) & (rows < stop)
+        at = rows[inside] - start
+        present[at, j] = True
+        q[at, j], v[at, j], e[at, j] = qs[inside], vs[inside], es[inside]
+    stream = StreamingEstimator(
+        model.joint_names,
+        wrap=model.continuous_columns,
+        ignored_names=model.mimic_joint_names,
+        settings=estimator,
+        log=lambda level, message: None,  # the report says what the node would have logged
+    )
+    names = np.array(model.joint_names, dtype=object)
+    state = np.full((3, len(targets), n), np.nan)
+    efforts = np.full((len(targets), n), np.nan)
+    silent = np.ones((len(targets), n), dtype=bool)
+    seen = np.zeros(n, dtype=bool)
+    stamps = recording.stamps[start:stop].tolist()
+    estimates = []
+    for m, stamp in enumerate(stamps):
+        joints = np.flatnonzero(present[m])
+        seen[joints] = True
+        velocities = v[m, joints]
+        measured = e[m, joints]
+        estimates += stream.update(
+            stamp,
+            names[joints].tolist(),
+            q[m, joints].tolist(),
+            velocities.tolist() if np.isfinite(velocities).all() else (),
+            measured.tolist() if np.isfinite(measured).all() else (),
+        )
+    estimates += stream.flush()
+    index = {stamp: k for k, stamp in enumerate(targets.tolist())}
+    for estimate in estimates:
+        k = index.get(estimate.stamp_ns)
+        if k is None:
+            continue
+        ready = estimate.ready
+        for column, values in enumerate((estimate.positions, estimate.velocities, estimate.accelerations)):
+            state[column, k] = np.where(ready, values, np.nan)
+        if estimate.efforts is not None:
+            efforts[k] = estimate.efforts
+        silent[k] = ~(estimate.ages <= estimator.max_gap)
+    absent = [model.joint_names[j] for j in range(n) if not seen[j]]
+    return state, efforts, silent, absent
 
 
 def _efforts_at(t_ns: np.ndarray, efforts: np.ndarray, targets: np.ndarray) -> np.ndarray:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -11,8 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from neforward_ros.bag.compute import estimate_states, results
-from neforward_ros.bag.export import CsvWriter, PlotSeries, write_plot
+from neforward_ros.bag.export import CsvWriter
 from neforward_ros.bag.options import BagOptions, check_options
+from neforward_ros.bag.plot import PlotSeries, write_plot
 from neforward_ros.bag.read import read
 from neforward_ros.bag.report import BagReport, Progress
 from neforward_ros.bag.write import RecordingWriter
@@ -36,6 +38,7 @@ def process_bag(
             output that exists already.
         ModelError: an invalid URDF.
     """
+    settings = options.settings
     started = time.monotonic()
     options = options if options is not None else BagOptions()
     check_options(options)
@@ -44,8 +47,15 @@ def process_bag(
     if not source.exists():
         raise InputError(f"no such file or directory: {source}")
     for path in (output, csv_path, plot_path):
-        if path is not None and Path(path).exists():
+        if path is None:
+            continue
+        if Path(path).exists():
             raise InputError(f"{path} exists already; remove it or choose another name")
+        folder = Path(path).absolute().parent
+        if not folder.is_dir():
+            raise InputError(f"cannot write {path}: no such folder {folder}")
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise InputError(f"cannot write {path}: folder {folder} is not writable")
     if plot_path is not None:
         try:
             import matplotlib  # noqa: F401
@@ -53,22 +63,22 @@ def process_bag(
             raise InputError("--plot needs matplotlib: pip install 'neforward_ros[plot]' (or matplotlib)") from exc
     recording = read(source, options, progress)
     model = recording.model
-    for link in (*options.accel_links, *options.imu_links):
+    for link in (*settings.accel_links, *settings.imu_links):
         if link not in model.link_index:
             raise InputError(f"link {link!r} is not in robot {model.name!r}")
     for option, names in (
-        ("--hold", options.hold_positions),
-        ("--effort", options.effort_scale),
-        ("--contact", options.contact_thresholds),
+        ("hold.joint_names (--hold)", settings.hold_positions),
+        ("effort.joint_names (--effort)", settings.effort_scale),
+        ("contact.joint_names (--contact)", settings.contact_thresholds),
     ):
         unknown = [name for name in names if name not in model.joint_index]
         if unknown:
             raise InputError(f"{option} names joints that robot {model.name!r} does not have: {', '.join(unknown)}")
-    for link in options.wrench_links:
+    for link in settings.wrench_links:
         if link not in model.link_index:
             raise InputError(f"link {link!r} is not in robot {model.name!r}")
     if recording.base is not None:
-        link = options.base_link or recording.base.frame_id
+        link = settings.base_link or recording.base.frame_id
         if link not in model.link_index:
             raise InputError(
                 f"the base topic {recording.base.topic} measures frame {link!r}, not a link of robot {model.name!r}; "
@@ -85,7 +95,8 @@ def process_bag(
     if report.samples_out == 0:
         raise InputError(
             "no output: no stamp of the recording has an estimate for every joint (publish policy wait) or for "
-            f"any joint; an estimate needs samples covering {options.window:g} s around its stamp"
+            f"any joint; an estimate needs samples covering {settings.estimator.window:g} s around its stamp "
+            "(estimator.window)"
         )
     # Every output is written under a temporary name and all are moved into place together at the
     # end: an error or an interrupt leaves none of them, and nothing half-written.
@@ -96,8 +107,8 @@ def process_bag(
         if csv_path is not None:
             partials.append(_partial(Path(csv_path)))
             measured = bool(np.isfinite(states.efforts).any())
-            csv = CsvWriter(partials[-1], model, options.publish_torques, options.publish_torques and measured)
-        series = PlotSeries(options.gravity, options.publish_torques) if plot_path is not None else None
+            csv = CsvWriter(partials[-1], model, settings.publish_torques, settings.publish_torques and measured)
+        series = PlotSeries(settings.gravity, settings.publish_torques) if plot_path is not None else None
         written = 0
         contact_state, origin = False, report.segments[0].first_ns
         for result, log_times in results(model, states, options):
@@ -116,17 +127,26 @@ def process_bag(
             if series is not None:
                 series.add(result)
             written += len(log_times)
-            progress("writing", written / len(states))
+            progress("computing", written / len(states))
         if csv is not None:
             csv.close()
         if series is not None and plot_path is not None:
+            progress("plotting", 0.0)
             partials.append(_partial(Path(plot_path)))
             write_plot(partials[-1], series, model)
+            progress("plotting", 1.0)
+        progress("finishing", 0.0)
         written_recording = recording_writer.finish()
         finals = [Path(p) for p in (csv_path, plot_path) if p is not None]
-        for partial, final in zip(partials, finals, strict=True):
-            partial.rename(final)
-        written_recording.rename(output)
+        # All outputs appear together: an interrupt now waits until they are in place.
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        try:
+            for partial, final in zip(partials, finals, strict=True):
+                partial.rename(final)
+            written_recording.rename(output)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+        progress("finishing", 1.0)
     except BaseException:
         recording_writer.discard()
         for partial in partials:

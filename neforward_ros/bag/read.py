@@ -29,6 +29,7 @@ class Recording:
 
 
 def read(source: Path, options: BagOptions, progress: Callable[[str, float], None]) -> Recording:
+    settings = options.settings
     from rosbags.rosbag2 import Reader
 
     try:
@@ -40,7 +41,7 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
         raise InputError(f"{source} is not a readable rosbag2 recording: {exc}") from exc
     try:
         topic = _joint_states_topic(reader, options.joint_states_topic, source)
-        model = _model(reader, options.urdf, options.root_link)
+        model = _model(reader, options.urdf, settings.root_link, settings.robot_description)
         connections = [c for c in reader.connections if c.topic == topic]
         total = max(sum(c.msgcount for c in connections), 1)
         report = BagReport(joint_states_topic=topic, messages=0)
@@ -70,10 +71,13 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
     report.zero_stamps = int(np.count_nonzero(zero))
     stamps[zero] = times[zero]  # no stamp: the recording time, as the node uses the receive time
     report.messages = len(stamps)
+    if not len(stamps):
+        what = "no messages" if not raws else f"only malformed messages ({len(raws)})"
+        raise InputError(f"{topic} in {source} has {what}: nothing to compute")
     columns, unknown = _columns(model, decoded, renumber)
     report.ignored_names = sorted(unknown)
     missing = [model.joint_names[j] for j in range(len(model.joint_names)) if j not in columns]
-    if missing and options.publish_policy == "wait":
+    if missing and settings.publish_policy == "wait":
         raise InputError(
             f"joints of robot {model.name!r} missing from {topic}: {', '.join(missing)} (publish policy wait: "
             "nothing could be written; partial writes the links they do not move, hold holds them)"
@@ -127,9 +131,11 @@ def _joint_states_topic(reader: Any, wanted: str | None, source: Path) -> str:
     return candidates[0]
 
 
-def _model(reader: Any, urdf: str | None, root_link: str | None = None) -> RobotModel:
+def _model(reader: Any, urdf: str | None, root_link: str | None = None, description: str = "") -> RobotModel:
     if urdf is not None:
         return load_model(urdf, root_link=root_link)
+    if description:  # the robot_description parameter of a params file
+        return load_model(description, root_link=root_link)
     connections = [
         c for c in reader.connections if c.msgtype == topics.STRING_TYPE and c.topic.endswith("robot_description")
     ]
@@ -138,7 +144,9 @@ def _model(reader: Any, urdf: str | None, root_link: str | None = None) -> Robot
         for _, _, raw in reader.messages(connections=connections):
             text = cdr.decode_string(raw)
     if text is None:
-        raise InputError("no --urdf given and no robot_description topic in the recording")
+        raise InputError(
+            "no --urdf given and no robot_description topic in the recording: give the URDF with --urdf FILE"
+        )
     try:
         return load_model(text, root_link=root_link)
     except ModelError as exc:

@@ -45,9 +45,11 @@ class Progress:
     def __init__(self, enabled: bool | None = None) -> None:
         self.enabled = sys.stderr.isatty() if enabled is None else enabled
         self._last = 0.0
+        self._finished = ""
 
     def __call__(self, what: str, fraction: float) -> None:
-        if not self.enabled:
+        """Draw stage ``what`` at ``fraction`` (0 to 1); a stage's 100 % line is drawn once."""
+        if not self.enabled or what == self._finished:
             return
         now = time.monotonic()
         if fraction < 1.0 and now - self._last < 0.1:
@@ -57,6 +59,7 @@ class Progress:
         sys.stderr.write(f"\r{what:<12} [{'#' * filled}{'.' * (30 - filled)}] {100 * fraction:5.1f}%")
         if fraction >= 1.0:
             sys.stderr.write("\n")
+            self._finished = what
         sys.stderr.flush()
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 from pathlib import Path
@@ -22,15 +23,16 @@ from neforward_ros.wire.rostypes import facts
 
 def output_topics(options: BagOptions) -> list[tuple[str, str]]:
     """(topic, type) of every output: the node's, resolved in the root namespace."""
+    settings = options.settings
     names = NodeNames()
     outputs = output_list(
-        options.accel_links,
-        options.imu_links,
+        settings.accel_links,
+        settings.imu_links,
         False,
-        options.publish_torques,
-        options.wrench_links,
-        bool(options.contact_thresholds),
-        bool(options.world_frame) and options.base_source != "fixed",
+        settings.publish_torques,
+        settings.wrench_links,
+        bool(settings.contact_thresholds),
+        bool(settings.world_frame) and settings.base_source != "fixed",
     )
     return [(names.resolve(o.topic), o.type) for o in outputs]
 
@@ -50,6 +52,7 @@ class RecordingWriter:
     def __init__(self, output: Path, options: BagOptions, model: RobotModel) -> None:
         from rosbags.rosbag2 import StoragePlugin, Writer
 
+        settings = options.settings
         self.options = options
         self.names = NodeNames()
         self.staging = output.with_name(f".{output.name}.partial-{os.getpid()}")
@@ -65,7 +68,7 @@ class RecordingWriter:
             for topic, kind in output_topics(options)
         }
         self.topics = [topic for topic, _ in output_topics(options)]
-        self._templates = messages.Templates(options.frame_prefix)
+        self._templates = messages.Templates(settings.frame_prefix)
         self._multi_dof = [self.connections[self.names.resolve(topic)] for topic in (LINK_STATES, COM_STATES)]
 
     def write(self, result: Result, log_times: np.ndarray) -> None:
@@ -76,16 +79,17 @@ class RecordingWriter:
 
     def _write_run(self, result: Result, log_times: np.ndarray) -> None:
         options, names = self.options, self.names
-        prefix = options.frame_prefix
+        settings = options.settings
+        prefix = settings.frame_prefix
         streams = [
             (connection, template.encode_many(result.stamp_ns, *blocks))
             for connection, template, blocks in zip(
                 self._multi_dof, self._templates(result), result.blocks, strict=True
             )
         ]
-        world = bool(options.world_frame) and options.base_source != "fixed"
-        per_sample = bool(options.accel_links or options.imu_links or options.dynamics_needed or world)
-        if not per_sample and _FAST_MCAP and _write_rows_mcap(self.writer, streams, log_times):
+        world = bool(settings.world_frame) and settings.base_source != "fixed"
+        per_sample = bool(settings.accel_links or settings.imu_links or options.dynamics_needed or world)
+        if not per_sample and _FAST_MCAP and fast_mcap_allowed() and _write_rows_mcap(self.writer, streams, log_times):
             return
         times = log_times.tolist()
         flat = [(connection, memoryview(data.reshape(-1)), data.shape[1]) for connection, data in streams]
@@ -96,9 +100,9 @@ class RecordingWriter:
                 sample = result.sample(i)
                 rest = []
                 if world and sample.world is not None:
-                    rest.append((WORLD_LINK_STATES, world_link_states(sample, options.world_frame, options.gravity)))
-                rest += per_link_messages(sample, options.accel_links, options.imu_links, prefix)
-                rest += dynamics_messages(sample, options.publish_torques, options.wrench_links, prefix)
+                    rest.append((WORLD_LINK_STATES, world_link_states(sample, settings.world_frame, settings.gravity)))
+                rest += per_link_messages(sample, settings.accel_links, settings.imu_links, prefix)
+                rest += dynamics_messages(sample, settings.publish_torques, settings.wrench_links, prefix)
                 for topic, contents in rest:
                     connection = self.connections[names.resolve(topic)]
                     self.writer.write(connection, log_time, cdr.encode(connection.msgtype, contents))
@@ -118,11 +122,28 @@ class RecordingWriter:
 
 
 _FAST_MCAP = True  # tests turn it off to compare with rosbags' own per-message writing
+FAST_MCAP_ROSBAGS = frozenset({"0.11.9"})
+"""rosbags releases whose MCAP writer internals the fast path was checked against (by the test that
+compares its output with rosbags' own message-by-message writing). With any other release the bag
+tool writes through ``Writer.write`` only: slower, never wrong."""
+
+
+@functools.cache
+def fast_mcap_allowed() -> bool:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("rosbags") in FAST_MCAP_ROSBAGS
+    except PackageNotFoundError:
+        return False
+
+
 _CHUNK_BYTES = 2**20  # as rosbags' MCAP writer
 
 
 def _write_rows_mcap(writer: Any, streams: list[tuple[Any, np.ndarray]], log_times: np.ndarray) -> bool:
-    """Write equal-length messages straight into rosbags' MCAP chunks, many at a time.
+    """Write equal-length messages straight into rosbags' MCAP chunks, many at a time (only for the
+    rosbags releases in :data:`FAST_MCAP_ROSBAGS`).
 
     Produces what rosbags' ``Writer.write`` produces message by message (message records of
     opcode 0x05 with channel id, sequence 0, log and publish time, data; the chunk's message

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -241,13 +242,22 @@ class _View:
     def _width(self) -> int:
         return max(len(name) for name in self.links)
 
-    def _table(self, source: dict[str, np.ndarray], title: str) -> list[str]:
+    def _table(self, source: dict[str, np.ndarray], title: str, rows: int | None = None) -> list[str]:
+        """The table; with ``rows``, at most that many lines: the links with the largest |a| first
+        when they do not all fit, and a last line saying how many are not shown."""
         width = self._width()
         lines = [title, f"{'link':<{width}}  {'|a| m/s^2':>10}  {'|alpha| rad/s^2':>15}  {'COM |a| m/s^2':>13}"]
-        for k, name in enumerate(self.links):
+        shown = list(range(len(self.links)))
+        if rows is not None and len(shown) > rows - len(lines):
+            room = max(rows - len(lines) - 1, 1)
+            shown = sorted(np.argsort(-source["a"], kind="stable")[:room].tolist())
+        for k in shown:
+            name = self.links[k]
             lines.append(
                 f"{name:<{width}}  {source['a'][k]:>10.3f}  {source['alpha'][k]:>15.3f}  {source['com'][k]:>13.3f}"
             )
+        if len(shown) < len(self.links):
+            lines.append(f"... {len(self.links) - len(shown)} more links (the largest |a| are shown)")
         return lines
 
     def refresh(self) -> None:
@@ -260,7 +270,10 @@ class _View:
         if not self.live:
             print(status, flush=True)
             return
-        lines = self._table(self.latest, f"neforward demo (kinematic accelerations, gravity removed) - {status}")
+        # Redrawn in place, so it must fit the terminal: a line for the cursor, at most the rows left.
+        rows = shutil.get_terminal_size().lines - 1
+        title = f"neforward demo (kinematic accelerations, gravity removed) - {status}"
+        lines = self._table(self.latest, title, rows)
         if self._lines:
             sys.stdout.write(f"\x1b[{self._lines}F")
         sys.stdout.write("\n".join(line + "\x1b[K" for line in lines) + "\n")

@@ -5,6 +5,9 @@ One batched call of :func:`neforward_ros.forward_recursion`; no DDS, no ROS.
 
 from __future__ import annotations
 
+import shutil
+import textwrap
+
 import numpy as np
 
 from neforward_ros.demo.robot import demo_trajectory
@@ -24,22 +27,27 @@ def print_table(urdf: str | None, seconds: float, samples: int, root_link: str |
     times = np.linspace(0.0, seconds, samples)
     kin = forward_recursion(model, *demo_trajectory(model, times))
     gravity = ", ".join(f"{g:g}" for g in DEFAULT_GRAVITY)
-    print(
-        f"neforward demo: robot {model.name!r} from {path}\n"
+    columns = shutil.get_terminal_size((100, 40)).columns
+    intro = (
         f"{len(model.link_names)} links, {len(model.joint_names)} joints, gravity ({gravity}) m/s^2 in the root "
-        f"frame {model.root_link!r}.\nEvery vector is in its link's own frame; accel and com_accel are specific "
+        f"frame {model.root_link!r}. Every vector is in its link's own frame; accel and com_accel are specific "
         "forces (what an accelerometer reads: +9.81 m/s^2 upward at rest)."
     )
+    print(f"neforward table: robot {model.name!r} from {path}")
+    print(textwrap.fill(intro, width=min(columns, 100)))
     width = max(len(name) for name in model.link_names)
-    header = (
-        f"{'link':<{width}}  {'omega [rad/s]':^30}  {'alpha [rad/s^2]':^30}  "
-        f"{'accel [m/s^2]':^30}  {'com_accel [m/s^2]':^30}"
-    )
+    quantities = [
+        ("omega [rad/s]", kin.omega),
+        ("alpha [rad/s^2]", kin.alpha),
+        ("accel [m/s^2]", kin.accel),
+        ("com_accel [m/s^2]", kin.com_accel),
+    ]
+    # Four vectors per line where the terminal is wide enough; else two blocks of two.
+    per_line = 4 if width + 4 * 32 <= columns else 2
+    blocks = [quantities[k : k + per_line] for k in range(0, 4, per_line)]
     for t, time in enumerate(times):
         print(f"\nt = {time:.3f} s")
-        print(header)
-        for k, name in enumerate(model.link_names):
-            print(
-                f"{name:<{width}}  {_vector(kin.omega[t, k])}  {_vector(kin.alpha[t, k])}  "
-                f"{_vector(kin.accel[t, k])}  {_vector(kin.com_accel[t, k])}"
-            )
+        for block in blocks:
+            print((f"{'link':<{width}}" + "".join(f"  {title:^30}" for title, _ in block)).rstrip())
+            for k, name in enumerate(model.link_names):
+                print(f"{name:<{width}}" + "".join(f"  {_vector(values[t, k])}" for _, values in block))

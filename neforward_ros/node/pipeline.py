@@ -175,14 +175,19 @@ class Pipeline:
     # -- topics -----------------------------------------------------------------------------
 
     def outputs(self) -> list[Output]:
-        """Every topic published with these settings (known before the model arrives)."""
+        """Every topic published with these settings (known before the model arrives); once a model
+        is loaded, per-link topics only for links it has (the others were reported as errors)."""
         settings = self.settings
+
+        def known(links: tuple[str, ...]) -> tuple[str, ...]:
+            return links if self.model is None else tuple(k for k in links if k in self.model.link_index)
+
         return output_list(
-            settings.accel_links,
-            settings.imu_links,
+            known(settings.accel_links),
+            known(settings.imu_links),
             settings.publish_markers,
             settings.publish_torques,
-            settings.wrench_links,
+            known(settings.wrench_links),
             bool(settings.contact_thresholds),
             bool(settings.world_frame) and settings.base_source != "fixed",
         )

@@ -1,0 +1,104 @@
+"""``neforward play`` feeding ``neforward run`` over real Cyclone DDS on loopback: a rosbag2 recording
+(the model from its robot_description topic, transient local) and a CSV, with their timing."""
+
+from __future__ import annotations
+
+import itertools
+import os
+import random
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+from test_bag import NAMES, record, trajectory
+
+from neforward_ros.dds.loopback import write_config
+from neforward_ros.node import topics
+from neforward_ros.wire import cdr
+
+from conftest import CONFIG_DIR
+from dds_peer import NodeProcess, Peer, loopback_env
+
+_DOMAINS = itertools.count(random.randint(160, 200))
+
+
+@pytest.fixture(scope="module")
+def config_uri(tmp_path_factory) -> str:
+    uri = write_config(tmp_path_factory.mktemp("dds")).as_uri()
+    os.environ["CYCLONEDDS_URI"] = uri
+    return uri
+
+
+def play_into_node(config_uri, tmp_path, play_arguments: list[str], node_arguments=()) -> tuple[list, float, str]:
+    """Start the node, then play; returns (link_states points received, play's duration, play's stderr)."""
+    domain = next(_DOMAINS)
+    env = loopback_env(domain, config_uri)
+    node = NodeProcess(list(node_arguments), tmp_path / "node.log", env)
+    peer = Peer(domain)
+    peer.reader("/neforward/link_states", topics.LINK_STATES_TYPE)
+    try:
+        peer.wait_connected(node)
+        started = time.monotonic()
+        played = subprocess.run(
+            [sys.executable, "-m", "neforward_ros.cli", "play", *play_arguments],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+        duration = time.monotonic() - started
+        assert played.returncode == 0, played.stderr
+        received = []
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline:
+            peer.wait(0.2)
+            received += [cdr.decode_multi_dof(raw) for raw in peer.take("/neforward/link_states")]
+        return received, duration, played.stderr
+    finally:
+        node.stop()
+
+
+def test_play_a_recording_into_the_node(config_uri, tmp_path) -> None:
+    t = record(tmp_path / "rec", seconds=2.0, velocities=True)  # with its robot_description topic
+    received, duration, err = play_into_node(
+        config_uri, tmp_path, [str(tmp_path / "rec"), "--rate", "2", "--delay", "2"]
+    )
+    assert "/robot_description (std_msgs/msg/String)" in err
+    assert f"{len(t) + 1} messages" in err.splitlines()[-1]  # the joint states and the description
+    # the node got the model from the played robot_description and answered nearly every joint state
+    # (the default fixed-lag estimator has no estimate for the first and last 0.1 s: 2 x 50 samples)
+    assert len(received) >= len(t) - 100 - 5, (len(received), err)
+    # the recording's stamps, unchanged
+    stamps = {p.stamp_ns for p in received}
+    recorded = {1_700_000_000 * 10**9 + round(x * 1e9) for x in t}
+    assert stamps <= recorded
+    # played at twice the speed: about 1 s, after the 2 s delay and the start-up
+    assert 2.9 < duration < 3.0 + 6.0
+
+
+def test_play_a_csv_into_the_node(config_uri, tmp_path) -> None:
+    rate = 500.0
+    t = np.arange(int(1.0 * rate)) / rate
+    q, _, _ = trajectory(t)
+    stamps = 1_800_000_000 * 10**9 + np.round(t * 1e9).astype(np.int64)
+    lines = ["stamp_ns," + ",".join(NAMES)]
+    lines += [f"{s}," + ",".join(f"{v:.12g}" for v in row) for s, row in zip(stamps, q, strict=True)]
+    (tmp_path / "states.csv").write_text("\n".join(lines) + "\n")
+    received, _, err = play_into_node(
+        config_uri, tmp_path, [str(tmp_path / "states.csv")], ["--urdf", str(CONFIG_DIR / "panda.urdf")]
+    )
+    assert len(received) >= len(t) - 100 - 5, err
+    assert {p.stamp_ns for p in received} <= set(stamps.tolist())
+
+
+def test_play_errors_are_one_line(tmp_path) -> None:
+    for arguments, text in (
+        ([str(tmp_path / "nope")], "no such file or directory"),
+        ([str(tmp_path), "--rate", "0"], "--rate must be a positive number"),
+    ):
+        done = subprocess.run(
+            [sys.executable, "-m", "neforward_ros.cli", "play", *arguments], capture_output=True, text=True
+        )
+        assert done.returncode == 1 and done.stderr.count("\n") == 1 and text in done.stderr, done.stderr
