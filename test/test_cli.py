@@ -110,3 +110,23 @@ def test_the_public_api_is_importable_by_name() -> None:
     for name in neforward_ros.__all__:
         assert getattr(neforward_ros, name) is not None, name
     assert sorted(neforward_ros.__all__) == sorted(neforward_ros._EXPORTS)
+
+
+def test_the_demo_live_view_fits_a_short_terminal() -> None:
+    """The table is redrawn in place, so it must not be taller than the terminal: with a humanoid's
+    34 links in 20 rows, the links with the largest |a| are shown and the rest counted."""
+    import numpy as np
+
+    from neforward_ros.demo.live import _View
+    from neforward_ros.estimation.stream import StreamSettings
+    from neforward_ros.model import load_model
+
+    model = load_model(TEST_ROBOTS["humanoid"])
+    view = _View(model, True, StreamSettings(), "")
+    n = len(model.link_names)
+    values = {"a": np.arange(n, dtype=float), "alpha": np.zeros(n), "com": np.zeros(n)}
+    lines = view._table(values, "title", rows=20)
+    assert len(lines) == 20 and lines[-1].startswith(f"... {n - (20 - 3)} more links")
+    shown = [line.split()[0] for line in lines[2:-1]]
+    assert shown == [name for k, name in enumerate(model.link_names) if k >= n - len(shown)]  # the largest |a|
+    assert len(view._table(values, "title")) == n + 2  # no limit: every link
