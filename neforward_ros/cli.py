@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import signal
 import sys
 from collections.abc import Sequence
 
@@ -187,6 +188,9 @@ def entry() -> None:
     then re-raises SIGINT at exit): everything was cleaned up already, so the exit is immediate.
     """
     status = main()
+    # The work is done (or cleaned up): a Ctrl-C now, while the interpreter shuts down, must not
+    # turn the outcome into a traceback or a death by SIGINT.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     if status == 130:
         sys.stdout.flush()
         sys.stderr.flush()
