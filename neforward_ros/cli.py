@@ -157,10 +157,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # output piped into `head` and the like
         sys.stderr.close()
         return 0
-    except KeyboardInterrupt:  # Ctrl-C: every command has cleaned up on its way out
-        print("neforward: interrupted", file=sys.stderr)
-        return 130
-    except Exception as exc:
+    except BaseException as exc:  # Ctrl-C (perhaps wrapped): every command has cleaned up on its way out
         if not _interrupted(exc):
             raise
         print("neforward: interrupted", file=sys.stderr)

@@ -63,20 +63,16 @@ def process_bag(
             raise InputError("--plot needs matplotlib: pip install 'neforward_ros[plot]' (or matplotlib)") from exc
     recording = read(source, options, progress)
     model = recording.model
-    for link in (*settings.accel_links, *settings.imu_links):
+    for link in settings.named_links:
         if link not in model.link_index:
             raise InputError(f"link {link!r} is not in robot {model.name!r}")
-    for option, names in (
-        ("hold.joint_names (--hold)", settings.hold_positions),
-        ("effort.joint_names (--effort)", settings.effort_scale),
-        ("contact.joint_names (--contact)", settings.contact_thresholds),
-    ):
+    for parameter, names in settings.named_joints:
         unknown = [name for name in names if name not in model.joint_index]
         if unknown:
-            raise InputError(f"{option} names joints that robot {model.name!r} does not have: {', '.join(unknown)}")
-    for link in settings.wrench_links:
-        if link not in model.link_index:
-            raise InputError(f"link {link!r} is not in robot {model.name!r}")
+            flag = parameter.split(".")[0]  # hold.joint_names (--hold)
+            raise InputError(
+                f"{parameter} (--{flag}) names joints that robot {model.name!r} does not have: {', '.join(unknown)}"
+            )
     if recording.base is not None:
         link = settings.base_link or recording.base.frame_id
         if link not in model.link_index:

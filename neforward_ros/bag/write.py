@@ -32,7 +32,7 @@ def output_topics(options: BagOptions) -> list[tuple[str, str]]:
         settings.publish_torques,
         settings.wrench_links,
         bool(settings.contact_thresholds),
-        bool(settings.world_frame) and settings.base_source != "fixed",
+        settings.world_states,
     )
     return [(names.resolve(o.topic), o.type) for o in outputs]
 
@@ -87,7 +87,7 @@ class RecordingWriter:
                 self._multi_dof, self._templates(result), result.blocks, strict=True
             )
         ]
-        world = bool(settings.world_frame) and settings.base_source != "fixed"
+        world = settings.world_states
         per_sample = bool(settings.accel_links or settings.imu_links or options.dynamics_needed or world)
         if not per_sample and _FAST_MCAP and fast_mcap_allowed() and _write_rows_mcap(self.writer, streams, log_times):
             return

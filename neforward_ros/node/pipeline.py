@@ -100,22 +100,14 @@ class Pipeline:
     def set_model(self, model: RobotModel, source: str = "caller") -> None:
         """Use ``model`` from now on; joint histories restart."""
         settings = self.settings
-        missing = [
-            link
-            for link in (*settings.accel_links, *settings.imu_links, *settings.wrench_links)
-            if link not in model.link_index
-        ]
+        missing = [link for link in settings.named_links if link not in model.link_index]
         if missing:
             self._log.log(
                 logging.ERROR,
                 f"accel_links/imu_links/wrench_links name links that robot {model.name!r} does not have: "
                 f"{', '.join(missing)}; nothing is published for them",
             )
-        for parameter, names in (
-            ("hold.joint_names", settings.hold_positions),
-            ("effort.joint_names", settings.effort_scale),
-            ("contact.joint_names", settings.contact_thresholds),
-        ):
+        for parameter, names in settings.named_joints:
             unknown = [name for name in names if name not in model.joint_index]
             if unknown:
                 self._log.log(
@@ -189,7 +181,7 @@ class Pipeline:
             settings.publish_torques,
             known(settings.wrench_links),
             bool(settings.contact_thresholds),
-            bool(settings.world_frame) and settings.base_source != "fixed",
+            settings.world_states,
         )
 
     def messages(self, result: Result) -> list[tuple[str, dict[str, Any]]]:

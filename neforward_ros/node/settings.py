@@ -276,6 +276,26 @@ class NodeSettings:
         """Whether any output needs the backward pass (torques, wrenches, contact)."""
         return bool(self.publish_torques or self.wrench_links or self.contact_thresholds)
 
+    @property
+    def world_states(self) -> bool:
+        """Whether world_link_states is published: a world_frame and a base source that can orient it."""
+        return bool(self.world_frame) and self.base_source != "fixed"
+
+    @property
+    def named_links(self) -> tuple[str, ...]:
+        """The links that accel_links, imu_links and wrench_links name (each must be the model's)."""
+        return (*self.accel_links, *self.imu_links, *self.wrench_links)
+
+    @property
+    def named_joints(self) -> tuple[tuple[str, Mapping[str, float]], ...]:
+        """(parameter, joint -> value) of the per-joint parameters: hold, effort, contact (each joint
+        must be one of the model's)."""
+        return (
+            ("hold.joint_names", self.hold_positions),
+            ("effort.joint_names", self.effort_scale),
+            ("contact.joint_names", self.contact_thresholds),
+        )
+
     def qos_override(self, topic: str, entity: str) -> QosOverride:
         """The overrides for a fully qualified topic's ``publisher`` or ``subscription``."""
         return self.qos_overrides.get((topic, entity), QosOverride())
