@@ -18,7 +18,6 @@ setup(
     install_requires=[
         "setuptools",
         "numpy>=1.24",
-        "yourdfpy>=0.0.56",
         "pyyaml>=6",
         "rosbags>=0.10",
         "cyclonedds>=0.10.5",
@@ -35,6 +34,8 @@ setup(
             "catkin_pkg>=1.0",
             "distributed>=2024.1",
             "xacro>=2.0",
+            "example-robot-data>=4",
+            "pybullet>=3.2",
         ],
     },
     zip_safe=True,

@@ -1,11 +1,11 @@
-"""What is derived once and kept on disk: parsed robot models, and the facts of ROS 2 message types.
+"""What is derived once and kept on disk: the facts of ROS 2 message types.
 
-Parsing a URDF means importing yourdfpy, which imports trimesh and whatever trimesh finds
-installed (0.6 to 1.5 s), and knowing a message type means building rosbags' whole ROS 2 Jazzy
-type store (200 classes, 0.1 s). Both results depend only on their inputs, so they are kept as
-JSON files whose names are a SHA-256 of those inputs and of this cache's format: a ``neforward
-bag`` run, a node start or ``neforward echo`` on a URDF and types seen before needs neither. A file
-that does not read back is ignored and rewritten; a cache that cannot be written is simply not used.
+Knowing a message type (its fields, definition and type hash) means building rosbags' whole ROS 2
+Jazzy type store (200 classes, 0.1 s). The facts depend only on the type and the rosbags release,
+so they are kept as JSON files whose names are a SHA-256 of those inputs and of this cache's format:
+a ``neforward bag`` run, a node start or ``neforward echo`` with types seen before needs no type
+store. A file that does not read back is ignored and rewritten; a cache that cannot be written is
+simply not used.
 
 The directory is ``$NEFORWARD_CACHE``, else ``$XDG_CACHE_HOME/neforward_ros``, else
 ``~/.cache/neforward_ros``. ``NEFORWARD_CACHE=off`` turns the cache off.
@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-FORMAT = 3
+FORMAT = 4
 """Bumped whenever what is kept changes, so that older files are not read."""
 
 

@@ -10,6 +10,8 @@ import importlib.util
 import sys
 
 PROGRAM = "neforward_node"
+PIP_PACKAGES = {"rosbags": "the ROS 2 message definitions the node encodes with"}
+"""Packages the node needs that ROS 2 does not bring (no rosdep keys yet): pip installs them."""
 
 
 def main() -> int:
@@ -19,6 +21,12 @@ def main() -> int:
             "`source /opt/ros/jazzy/setup.bash` first, or use `neforward run`, the same node without ROS",
             file=sys.stderr,
         )
+        return 1
+    missing = [name for name in PIP_PACKAGES if importlib.util.find_spec(name) is None]
+    if missing:
+        what = "; ".join(f"{name} ({PIP_PACKAGES[name]})" for name in missing)
+        install = f"pip install {' '.join(missing)}"
+        print(f"{PROGRAM}: error: cannot start: {what} not installed in {sys.executable}: {install}", file=sys.stderr)
         return 1
     try:
         from neforward_ros import ros_node

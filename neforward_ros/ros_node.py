@@ -27,7 +27,7 @@ from std_msgs.msg import String
 from trajectory_msgs.msg import JointTrajectory
 
 from neforward_ros.errors import NeforwardError
-from neforward_ros.model import load_model, require_urdf_parser
+from neforward_ros.model import load_model
 from neforward_ros.node.handlers import MessageHandlers
 from neforward_ros.node.pipeline import Pipeline
 from neforward_ros.node.ros_args import ros_args_section
@@ -155,7 +155,6 @@ def main(args: list[str] | None = None) -> int:
     try:
         # The checks `neforward run` makes, before rcl reads the same arguments: the same files and
         # values are accepted or refused by both runtimes, with the same one-line message.
-        require_urdf_parser()
         node_settings(command_line_parameters(ros_args_section(argv), strict=False)[1])
     except NeforwardError as exc:
         print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)

@@ -1,4 +1,4 @@
-"""Rotations: quaternions of rotation matrices.
+"""Rotations: quaternions of rotation matrices, and rotation matrices of quaternions.
 
 Quaternions are (x, y, z, w), unit, with w >= 0, as geometry_msgs/Quaternion carries them.
 """
@@ -66,3 +66,14 @@ def _quaternions_vectorised(r: np.ndarray) -> np.ndarray:
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     q[q[:, 3] < 0.0] *= -1.0
     return q.reshape(*r.shape[:-2], 4)
+
+
+def rotation_matrix(quaternion: np.ndarray) -> np.ndarray:
+    """The rotation matrices of unit quaternions (x, y, z, w), shape (..., 4) -> (..., 3, 3)."""
+    x, y, z, w = np.moveaxis(np.asarray(quaternion, dtype=float), -1, 0)
+    rows = (
+        (1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)),
+        (2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)),
+        (2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)),
+    )
+    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)

@@ -112,7 +112,7 @@ def assert_close(actual: np.ndarray, expected: np.ndarray, rel: float, what: str
 
 @pytest.fixture(autouse=True, scope="session")
 def disk_cache_of_this_session(tmp_path_factory):
-    """Parsed models are cached on disk (neforward_ros.disk_cache): the suite keeps its own, in a
+    """Message-type facts are cached on disk (neforward_ros.disk_cache): the suite keeps its own, in a
     temporary folder, for itself and every process it starts."""
     import os
 

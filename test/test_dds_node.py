@@ -337,7 +337,7 @@ def test_ctrl_c_exits_cleanly_and_startup_errors_are_one_line(start, config_uri,
     assert "Traceback" not in node.log() and "stopped:" in node.log()
     environment = {**os.environ, "CYCLONEDDS_URI": config_uri, "ROS_DOMAIN_ID": str(domain)}
     for arguments, text in (
-        (["--urdf", "/no/such.urdf"], "cannot read --urdf"),
+        (["--urdf", "/no/such.urdf"], "cannot read URDF file"),
         (["--urdf", str(tmp_path / "bad.urdf")], "malformed URDF XML"),
         (["--urdf", str(PANDA), "--ros-args", "-p", "estimator.mode:=instant"], "estimator.mode must be one of"),
         (["--urdf", str(PANDA), "--ros-args", "--enclave", "x"], "not supported"),

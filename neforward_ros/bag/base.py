@@ -23,8 +23,8 @@ from neforward_ros.estimation.coverage import covered_mask
 from neforward_ros.kernel import SLICES
 from neforward_ros.model import RobotModel
 from neforward_ros.node import topics
-from neforward_ros.node.base_source import rotation_matrix
 from neforward_ros.recursion import kinematics_table
+from neforward_ros.rotations import rotation_matrix
 from neforward_ros.stamps import NS
 
 

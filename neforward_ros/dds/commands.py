@@ -10,7 +10,6 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import yaml
@@ -18,7 +17,7 @@ import yaml
 from neforward_ros.dds.qos import default_qos, latched_qos
 from neforward_ros.dds.types import RawBytes, raw_reader
 from neforward_ros.errors import InputError
-from neforward_ros.model import require_urdf_parser
+from neforward_ros.model import description_text
 from neforward_ros.node import topics
 from neforward_ros.node.names import NodeNames
 from neforward_ros.node.settings import NODE_NAME, command_line_parameters, node_settings
@@ -52,14 +51,10 @@ def run_node(urdf: str | None, params_file: str | None, ros_args: Sequence[str])
     signal.signal(signal.SIGTERM, on_signal)
     from neforward_ros.dds.runtime import DdsNode  # imports cyclonedds
 
-    require_urdf_parser()
     parsed, values = command_line_parameters(ros_args, params_file=params_file)
     node_name = parsed.node_name or NODE_NAME
     if urdf is not None:
-        try:
-            values["robot_description"] = Path(urdf).read_text()
-        except OSError as exc:
-            raise InputError(f"cannot read --urdf {urdf}: {exc.strerror or exc}") from exc
+        values["robot_description"] = description_text(urdf)
     settings = node_settings(values)
     use_sim_time = bool(values.get("use_sim_time", False))
     names = NodeNames(node_name, parsed.namespace or "/", parsed.remaps)

@@ -22,6 +22,7 @@ import numpy as np
 
 from neforward_ros.estimation.stream import StreamingEstimator, StreamSettings
 from neforward_ros.logs import LogFunction, ThrottledLog
+from neforward_ros.rotations import rotation_matrix
 from neforward_ros.stamps import NS
 
 BASE_SOURCES = ("fixed", "imu", "odometry")
@@ -196,18 +197,6 @@ def _unit_quaternion(values: Sequence[float] | None) -> np.ndarray | None:
     q = np.asarray(values, dtype=float)
     norm = float(np.linalg.norm(q)) if q.shape == (4,) and np.all(np.isfinite(q)) else 0.0
     return q / norm if norm > 0.5 else None  # all zeros: "no orientation" by convention
-
-
-def rotation_matrix(q: np.ndarray) -> np.ndarray:
-    """The rotation matrix of a unit quaternion (x, y, z, w)."""
-    x, y, z, w = q
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
 
 
 def _rotate_inverse(q: np.ndarray, vector: np.ndarray) -> np.ndarray:

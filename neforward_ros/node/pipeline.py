@@ -23,7 +23,7 @@ from neforward_ros.kernel import kernel_of
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel, load_model
 from neforward_ros.node import messages
-from neforward_ros.node.base_source import Aligner, BaseMessage, BaseTracker, LinkSample, rotation_matrix
+from neforward_ros.node.base_source import Aligner, BaseMessage, BaseTracker, LinkSample
 from neforward_ros.node.contact import ContactDetector
 from neforward_ros.node.names import is_token
 from neforward_ros.node.policy import apply_policy, hold_vector
@@ -31,6 +31,7 @@ from neforward_ros.node.result import Dynamics, Result, make_result
 from neforward_ros.node.settings import NodeSettings
 from neforward_ros.node.topics import ROBOT_DESCRIPTION, Output, output_list
 from neforward_ros.recursion import kinematics_table, root_state
+from neforward_ros.rotations import rotation_matrix
 
 
 @dataclass(frozen=True)

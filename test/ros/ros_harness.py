@@ -40,7 +40,7 @@ COPY_IGNORE = shutil.ignore_patterns(
     ".hypothesis",
     "*.egg-info",
 )
-DEPENDENCIES = ("rclpy", "numpy", "yaml", "yourdfpy", "rosbags", "cyclonedds")
+DEPENDENCIES = ("rclpy", "numpy", "yaml", "rosbags", "cyclonedds")
 
 _DOMAINS = itertools.count(random.randint(20, 60))
 
@@ -94,7 +94,7 @@ class Workspace:
         if missing:
             raise DependencyMissingError(
                 f"the ROS Python {self.python} lacks {', '.join(missing)}: `make test` prepares .venv-ros with "
-                "them; elsewhere pip install yourdfpy rosbags cyclonedds into the Python ROS 2 runs on"
+                "them; elsewhere pip install rosbags cyclonedds into the Python ROS 2 runs on"
             )
         shutil.copytree(REPO, root / "src" / "neforward_ros", ignore=COPY_IGNORE, symlinks=True)
         self.colcon_list = self._colcon(base, "list")

@@ -373,11 +373,12 @@ def test_best_effort_joint_states_connect_with_the_qos_override(graph, tmp_path)
         assert node.interrupt() == 0
 
 
-def test_a_missing_urdf_parser_is_one_line_at_start(graph, tmp_path) -> None:
-    """A ROS user who forgot `pip install yourdfpy`: Debian's own python3, without it, runs the node."""
-    probe = graph.run("/usr/bin/python3", "-c", "import yourdfpy")
+def test_a_missing_pip_dependency_is_one_line_at_start(graph, tmp_path) -> None:
+    """A ROS user who forgot `pip install rosbags`: Debian's own python3, without it, runs the node."""
+    probe = graph.run("/usr/bin/python3", "-c", "import rosbags")
     if probe.returncode == 0:
-        pytest.skip("/usr/bin/python3 has yourdfpy installed, so it cannot show the missing parser")
+        pytest.skip("/usr/bin/python3 has rosbags installed, so it cannot show the missing package")
     executable = graph.workspace.root / "install" / "neforward_ros" / "lib" / "neforward_ros" / "neforward_node"
     done = graph.run("/usr/bin/python3", str(executable), "--ros-args", "--params-file", params_file(tmp_path))
-    assert "the URDF parser yourdfpy is not installed" in one_error_line(done)
+    assert "rosbags (the ROS 2 message definitions the node encodes with) not installed" in one_error_line(done)
+    assert "pip install rosbags" in one_error_line(done)

@@ -1,0 +1,15 @@
+"""The robot model: a URDF read as ROS reads it, into the immutable :class:`RobotModel` every
+computation shares.
+
+- :mod:`.types`: :class:`RobotModel`, :class:`ParentJoint`, :class:`JointKind`.
+- :mod:`.xml_tree`: XML as leniently as urdfdom reads it (no namespaces, ``--`` in comments).
+- :mod:`.xacro`: whether a description needs xacro, and its expansion.
+- :mod:`.urdf`: the links and joints of a URDF, by urdfdom's rules.
+- :mod:`.build`: the checked tree, its root and joint columns; what is refused, what is warned.
+- :mod:`.load`: :func:`load_model`.
+"""
+
+from neforward_ros.model.load import description_text, load_model
+from neforward_ros.model.types import JointKind, Mat3, ParentJoint, RobotModel, Vec3
+
+__all__ = ["JointKind", "Mat3", "ParentJoint", "RobotModel", "Vec3", "description_text", "load_model"]
