@@ -178,7 +178,7 @@ def expected_outputs(stamps: np.ndarray, lag_ns: int) -> int:
 
 def warm_up_ns(mode: str) -> int:
     """How long after the first input the node's default estimator in this mode gives its first estimate."""
-    from neforward_ros.estimation.stream import StreamSettings
+    from neforward_ros.estimation.settings import StreamSettings
 
     return round(StreamSettings(mode=mode).support.before * 1e9)
 
@@ -227,7 +227,7 @@ def main() -> None:
         return
     from neforward_ros import load_model
     from neforward_ros.dds.loopback import use_loopback
-    from neforward_ros.estimation.stream import StreamSettings
+    from neforward_ros.estimation.settings import StreamSettings
     from neforward_ros.node import topics
 
     domain = use_loopback()

@@ -29,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from neforward_ros.estimation.motion import KalmanSettings
-from neforward_ros.estimation.stream import StreamingEstimator, StreamSettings
+from neforward_ros.estimation.settings import StreamSettings
+from neforward_ros.estimation.stream import StreamingEstimator
 
 AMPLITUDE = np.array([0.8, 0.3, 0.05])
 FREQUENCY = np.array([0.2, 0.7, 1.6])

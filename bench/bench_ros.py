@@ -51,7 +51,7 @@ def main() -> None:
 
     from neforward_ros import load_model
     from neforward_ros.dds.loopback import write_config
-    from neforward_ros.estimation.stream import StreamSettings
+    from neforward_ros.estimation.settings import StreamSettings
 
     reason = why_not_runnable()
     if reason:

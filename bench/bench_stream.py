@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from neforward_ros import forward_recursion, load_model
-from neforward_ros.estimation.stream import StreamingEstimator, StreamSettings
+from neforward_ros.estimation.settings import StreamSettings
+from neforward_ros.estimation.stream import StreamingEstimator
 
 URDF = Path(__file__).resolve().parent.parent / "config" / "panda.urdf"
 AMPLITUDE = np.array([0.8, 0.3, 0.05])

@@ -15,14 +15,14 @@ _EXPORTS = {
     "DEFAULT_GRAVITY": "neforward_ros.recursion",
     "InputError": "neforward_ros.errors",
     "InverseDynamics": "neforward_ros.dynamics",
-    "JointEstimate": "neforward_ros.estimation.stream",
+    "JointEstimate": "neforward_ros.estimation.estimate",
     "JointKind": "neforward_ros.model",
     "LinkKinematics": "neforward_ros.recursion",
     "ModelError": "neforward_ros.errors",
     "NeforwardError": "neforward_ros.errors",
     "ParentJoint": "neforward_ros.model",
     "RobotModel": "neforward_ros.model",
-    "StreamSettings": "neforward_ros.estimation.stream",
+    "StreamSettings": "neforward_ros.estimation.settings",
     "StreamingEstimator": "neforward_ros.estimation.stream",
     "estimate_derivatives": "neforward_ros.estimation.batch",
     "forward_recursion": "neforward_ros.recursion",
@@ -54,7 +54,9 @@ if TYPE_CHECKING:
     from neforward_ros.dynamics import InverseDynamics, inverse_dynamics
     from neforward_ros.errors import InputError, ModelError, NeforwardError
     from neforward_ros.estimation.batch import estimate_derivatives
-    from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator, StreamSettings
+    from neforward_ros.estimation.estimate import JointEstimate
+    from neforward_ros.estimation.settings import StreamSettings
+    from neforward_ros.estimation.stream import StreamingEstimator
     from neforward_ros.model import JointKind, ParentJoint, RobotModel, load_model
     from neforward_ros.recursion import DEFAULT_GRAVITY, BaseMotion, LinkKinematics, forward_recursion
 

@@ -19,6 +19,7 @@ import signal
 import sys
 from collections.abc import Sequence
 
+from neforward_ros import terminal
 from neforward_ros.errors import NeforwardError
 from neforward_ros.resources import DEFAULT_ROBOT
 
@@ -131,7 +132,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if not (math.isfinite(args.seconds) and args.seconds > 0 and math.isfinite(args.rate) and args.rate > 0):
                 raise NeforwardError("--seconds and --rate must be positive numbers")
             from neforward_ros.demo.live import live_demo
-            from neforward_ros.estimation.stream import StreamSettings
+            from neforward_ros.estimation.settings import StreamSettings
 
             estimator = StreamSettings(method=args.method, mode=args.mode)
             return live_demo(args.seconds, args.urdf, args.rate, estimator, args.root_link)
@@ -152,7 +153,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             return echo(args.topic, args.type, args.count)
     except (NeforwardError, FileNotFoundError) as exc:
-        print(f"neforward: error: {exc}", file=sys.stderr)
+        terminal.say(f"neforward: error: {exc}")
         return 1
     except BrokenPipeError:  # output piped into `head` and the like
         sys.stderr.close()
@@ -160,7 +161,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BaseException as exc:  # Ctrl-C (perhaps wrapped): every command has cleaned up on its way out
         if not _interrupted(exc):
             raise
-        print("neforward: interrupted", file=sys.stderr)
+        terminal.say("neforward: interrupted")
         return 130
     return 0
 

@@ -70,3 +70,41 @@ class ThrottledLog:
         self._last[key] = now
         self._log(level, f"{message} ({skipped} more like this since the last report)" if skipped else message)
         return True
+
+
+class BoundedLog:
+    """A log function that writes at most ``rate`` lines per second on average, in bursts of up to
+    ``burst`` (a token bucket): the runtimes wrap their log in it, so that no input, however broken and
+    however varied, makes the node write more than a few lines per second, on top of the throttling
+    of each kind of problem. Lines over the bound are counted and the count said with the next line.
+
+    Args:
+        log: where lines go.
+        rate: lines per second in the long run.
+        burst: lines at once (start-up says a few things).
+        clock: monotonic seconds; injectable for tests.
+    """
+
+    def __init__(
+        self, log: LogFunction, rate: float = 2.0, burst: int = 30, clock: Callable[[], float] = time.monotonic
+    ) -> None:
+        self._log = log
+        self._rate = rate
+        self._burst = float(burst)
+        self._tokens = float(burst)
+        self._clock = clock
+        self._last = clock()
+        self.suppressed = 0
+
+    def __call__(self, level: int, message: str) -> None:
+        now = self._clock()
+        self._tokens = min(self._burst, self._tokens + (now - self._last) * self._rate)
+        self._last = now
+        if self._tokens < 1.0:
+            self.suppressed += 1
+            return
+        self._tokens -= 1.0
+        if self.suppressed:
+            message = f"{message} ({self.suppressed} lines left out before this one: the log is kept short)"
+            self.suppressed = 0
+        self._log(level, message)

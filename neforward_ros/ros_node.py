@@ -27,6 +27,7 @@ from std_msgs.msg import String
 from trajectory_msgs.msg import JointTrajectory
 
 from neforward_ros.errors import NeforwardError
+from neforward_ros.logs import BoundedLog
 from neforward_ros.model import load_model
 from neforward_ros.node.handlers import MessageHandlers
 from neforward_ros.node.pipeline import Pipeline
@@ -56,7 +57,8 @@ class NeforwardNode(Node):
             )
             self.declare_parameter(parameter.name, parameter.default, descriptor)
         self.settings = node_settings(self._values())
-        self.pipeline = Pipeline(self.settings, log=self._log_to_ros)
+        self._bounded_log = BoundedLog(self._log_to_ros)
+        self.pipeline = Pipeline(self.settings, log=self._bounded_log)
         overridable = QoSOverridingOptions.with_default_policies()
         self._output_publishers = {
             output.topic: self.create_publisher(
@@ -64,7 +66,7 @@ class NeforwardNode(Node):
             )
             for output in self.pipeline.outputs()
         }
-        self.handlers = MessageHandlers(self.pipeline, self._publish, log=self._log_to_ros)
+        self.handlers = MessageHandlers(self.pipeline, self._publish, log=self._bounded_log)
         input_qos = QoSProfile(depth=self.settings.qos_depth)
         if self.settings.acceleration_source == "supplied":
             self._raw_subscription(JointTrajectory, JOINT_STATES_ACCEL, self.handlers.on_joint_trajectory, input_qos)
@@ -89,7 +91,7 @@ class NeforwardNode(Node):
 
         def incompatible(event: Any) -> None:
             policy = qos_policy_name_from_kind(event.last_policy_kind)
-            self._log_to_ros(
+            self._bounded_log(
                 logging.WARNING,
                 f"a publisher on {self.resolve_topic_name(topic)} offers QoS incompatible with this subscription "
                 f"({policy}): its messages are not received. For a best-effort publisher, set the parameter "
@@ -131,7 +133,8 @@ class NeforwardNode(Node):
             if text is not None:
                 if not text:
                     raise NeforwardError("robot_description cannot be emptied while the node runs")
-                self.pipeline.set_model(load_model(text, root_link=settings.root_link), "robot_description parameter")
+                model = load_model(text, root_link=settings.root_link, log=self._bounded_log)
+                self.pipeline.set_model(model, "robot_description parameter")
         except NeforwardError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         self.pipeline.update_settings(settings)

@@ -4,6 +4,7 @@ process (``neforward run``), and a test participant that publishes and receives 
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -21,7 +22,7 @@ from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
 from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr
 
-STARTUP_TIMEOUT = 30.0
+STARTUP_TIMEOUT = 60.0
 
 
 class NodeProcess:
@@ -31,7 +32,11 @@ class NodeProcess:
         self.log_path = log_path
         self._log = open(log_path, "w")
         command = [sys.executable, "-m", "neforward_ros.cli", "run", *arguments]
-        self.process = subprocess.Popen(command, stdout=self._log, stderr=subprocess.STDOUT, env=environment)
+        # SIGINT at its default whatever the suite inherited: stop() sends it as Ctrl-C would
+        self.process = subprocess.Popen(
+            command, stdout=self._log, stderr=subprocess.STDOUT, env=environment,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        )  # fmt: skip
 
     def log(self) -> str:
         return self.log_path.read_text()

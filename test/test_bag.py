@@ -49,9 +49,17 @@ def record(path, *, seconds=4.0, velocities=False, storage=StoragePlugin.MCAP, d
         for topic, kind in extra.get("other_topics", []):
             writer.add_connection(topic, kind, typestore=store)
         names = extra.get("names", NAMES)
+        strays = extra.get("strays", {})
         for run in range(runs):  # concatenated runs: stamps go back at each new run
             for k in range(count):
                 stamp = EPOCH + round(t[k] * 1e9)
+                if k in strays:  # a malformed message first: (stamp, names, positions)
+                    stray_stamp, stray_names, stray_positions = strays[k](stamp)
+                    stray = {"header": {"stamp": time_message(stray_stamp)}, "name": stray_names,
+                             "position": stray_positions}  # fmt: skip
+                    writer.write(
+                        joint_states, EPOCH + round(t[k] * 1e9) - 1, cdr.encode(topics.JOINT_STATE_TYPE, stray)
+                    )
                 contents = {"header": {"stamp": time_message(stamp)}, "name": names, "position": q[k].tolist()}
                 if velocities:
                     contents["velocity"] = qd[k].tolist()
@@ -165,6 +173,36 @@ def test_concatenated_runs_are_segments_each_estimated_on_its_own(tmp_path, caps
         halves, (out["/neforward/com_states"][:each], out["/neforward/com_states"][each:]), strict=True
     ):
         check_against_pinocchio(half, com)
+
+
+def test_stray_messages_in_a_recording_cost_no_other_output(tmp_path, capsys) -> None:
+    """The node's rules offline: the outputs of a recording with single malformed messages mixed in are
+    those of the recording without them, byte for byte, for the whole-recording estimator and for the
+    replayed one alike."""
+    strays = {
+        300: lambda stamp: (stamp - 1, [*NAMES, NAMES[0]], [0.1] * 9),  # a joint named twice
+        400: lambda stamp: (stamp - 5 * 10**9, NAMES, [1.0] * 8),  # 5 s in the past
+        500: lambda stamp: (0, NAMES, [2.0] * 8),  # a zero stamp among stamped ones
+        600: lambda stamp: (stamp - 1, [f"x{i}" for i in range(20_000)], [0.0] * 20_000),  # huge, all unknown
+        700: lambda stamp: (stamp + 60 * 10**9, NAMES, [3.0] * 8),  # a minute ahead
+        800: lambda stamp: (stamp - 1, NAMES, [0.0] * 7),  # a length mismatch
+    }
+    record(tmp_path / "clean", seconds=2.0)
+    record(tmp_path / "dirty", seconds=2.0, strays=strays)
+    for flags in ([], ["-p", "estimator.mode:=causal"]):
+        outputs = {}
+        for name in ("clean", "dirty"):
+            out = tmp_path / f"{name}_out{len(flags)}"
+            assert main(["bag", str(tmp_path / name), "-o", str(out), "--urdf", str(PANDA), *flags]) == 0
+            outputs[name] = [raw for _, raw in read_output(out)["/neforward/link_states"]]
+        printed = capsys.readouterr()
+        assert len(outputs["clean"]) > 800 and outputs["dirty"] == outputs["clean"], flags
+        assert "name joint 'panda_joint1' more than once: dropped" in printed.out
+        assert "ignored, not joints of the model: 20000 names: 'x0', 'x1', 'x2' and 19997 more" in printed.out
+        assert "segments" not in printed.out  # one segment: nothing went back and on from there
+        assert "6 joint state message(s) dropped by the node's rules" in printed.out
+        assert "s before the stream's newest, which went on without them: dropped" in printed.out
+        assert "zero header.stamp among stamped ones: dropped" in printed.out
 
 
 def test_no_output_whose_window_reaches_into_a_gap(tmp_path) -> None:

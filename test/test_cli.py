@@ -118,7 +118,7 @@ def test_the_demo_live_view_fits_a_short_terminal() -> None:
     import numpy as np
 
     from neforward_ros.demo.live import _View
-    from neforward_ros.estimation.stream import StreamSettings
+    from neforward_ros.estimation.settings import StreamSettings
     from neforward_ros.model import load_model
 
     model = load_model(TEST_ROBOTS["humanoid"])

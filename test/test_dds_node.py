@@ -78,7 +78,7 @@ def stream(peer: Peer, states, rate: float, topics=()) -> dict[str, list[bytes]]
     return received
 
 
-def collect(peer: Peer, received: dict[str, list[bytes]], until, timeout: float = 5.0) -> None:
+def collect(peer: Peer, received: dict[str, list[bytes]], until, timeout: float = 60.0) -> None:
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline and not until(received):
         peer.wait(0.05)
@@ -237,7 +237,7 @@ def test_bad_input_over_the_wire_then_good_input_is_still_right(start, domain) -
         joint_state(t, NAMES, [0.1, 0.2]),  # names and positions of different lengths
         joint_state(t + 10**7, NAMES, [float("nan")] * len(NAMES)),  # NaN
         joint_state(t + 2 * 10**7, ["ghost", *NAMES], [9.0, *q.tolist()]),  # an unknown joint (and a good sample)
-        joint_state(t - 10**9, NAMES, q.tolist()),  # stamps going backwards
+        joint_state(t - 10**9, NAMES, q.tolist()),  # one stamp going backwards: a stray
     ]
     stream(peer, bad, rate=100.0)
     good = still_states(q, 30, start_ns=t + 10**9)
@@ -246,7 +246,12 @@ def test_bad_input_over_the_wire_then_good_input_is_still_right(start, domain) -
     assert node.alive()
     check_still_outputs(received[OUTPUTS[0]][-1], received[OUTPUTS[1]][-1], received[OUTPUTS[2]][-1], q)
     log = node.log()
-    for text in ("names but 2 positions", "non-finite position", "unknown joint 'ghost'", "went back in time"):
+    for text in (
+        "names but 2 positions",
+        "non-finite position",
+        "joint states name 1 joint: 'ghost' that the model does not have",
+        "s before the stream's newest, which went on without them: dropped",
+    ):
         assert text in log, text
     assert "Traceback" not in log
 
@@ -365,7 +370,7 @@ def test_echo_prints_yaml_like_ros2_topic_echo(start, config_uri, domain) -> Non
         time.sleep(3.0)  # the echo process discovers the node
         q = np.zeros(len(NAMES))
         stream(peer, still_states(q, 300, start_ns=EPOCH), rate=100.0)
-        out, err = echo.communicate(timeout=20)
+        out, err = echo.communicate(timeout=60)
     finally:
         echo.kill()
     assert echo.returncode == 0, err
@@ -431,7 +436,7 @@ def test_a_base_imu_moves_the_quadruped(start, domain) -> None:
         peer.write("/imu", imu)
         time.sleep(0.004)
         received["/neforward/link_states"] += peer.take("/neforward/link_states")
-    collect(peer, received, lambda r: len(r["/neforward/link_states"]) >= 200, timeout=10.0)
+    collect(peer, received, lambda r: len(r["/neforward/link_states"]) >= 200, timeout=60.0)
     points = [cdr.decode_multi_dof(b) for b in received["/neforward/link_states"]]
     assert len(points) >= 200
     stamps = (np.array([p.stamp_ns for p in points]) - EPOCH) / 1e9

@@ -12,7 +12,9 @@ from hypothesis import strategies as st
 
 from neforward_ros import InputError
 from neforward_ros.estimation.batch import estimate_derivatives
-from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator, StreamSettings
+from neforward_ros.estimation.estimate import JointEstimate
+from neforward_ros.estimation.settings import StreamSettings
+from neforward_ros.estimation.stream import StreamingEstimator
 
 from conftest import LogRecorder, jittered_stamps, reference, relative_rms
 

@@ -13,7 +13,8 @@ import pytest
 from neforward_ros.estimation.coverage import Support, covered_mask, uncovered
 from neforward_ros.estimation.kalman import KalmanTrack
 from neforward_ros.estimation.motion import ORDER, TREND_JERK, KalmanSettings, MotionModel
-from neforward_ros.estimation.stream import StreamingEstimator, StreamSettings
+from neforward_ros.estimation.settings import StreamSettings
+from neforward_ros.estimation.stream import StreamingEstimator
 
 from conftest import LogRecorder, reference
 

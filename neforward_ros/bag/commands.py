@@ -34,8 +34,18 @@ def run_bag(args: argparse.Namespace) -> int:
         output = Path(args.output)
         csv = _beside(output, args.csv, ".csv")
         plot = _beside(output, args.plot, ".png")
-        report = process_bag(inputs[0], output, options, csv_path=csv, plot_path=plot, progress=Progress())
-        print(describe(report))
+        try:
+            report = process_bag(inputs[0], output, options, csv_path=csv, plot_path=plot, progress=Progress())
+        except KeyboardInterrupt:
+            # Every output is moved into place at once, with Ctrl-C held off (process_bag): if they are
+            # there, the run was done before the interrupt took effect.
+            if not output.exists():
+                raise
+            return 0
+        try:
+            print(describe(report))
+        except KeyboardInterrupt:
+            pass  # the outputs are done: saying so is all that was left
         return 0
     if args.csv or args.plot:
         raise InputError("with several recordings, --csv and --plot take no path: each output gets NAME.csv, NAME.png")

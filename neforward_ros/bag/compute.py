@@ -16,7 +16,8 @@ from neforward_ros.bag.report import Segment
 from neforward_ros.dynamics import split_values, wrenches_from_table
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.coverage import covered_mask
-from neforward_ros.estimation.stream import StreamingEstimator, StreamSettings
+from neforward_ros.estimation.settings import StreamSettings
+from neforward_ros.estimation.stream import StreamingEstimator
 from neforward_ros.logs import ThrottledLog
 from neforward_ros.model import RobotModel
 from neforward_ros.node.contact import ContactDetector
@@ -100,14 +101,9 @@ def results(
 
 
 def _segments(recording: Recording) -> list[tuple[int, int]]:
-    """Message index ranges [start, stop) within which every joint's stamps increase."""
-    stamps = recording.stamps
-    breaks = set()
-    for rows, _, _, _ in recording.columns.values():
-        joint_stamps = stamps[rows]
-        backwards = np.nonzero(np.diff(joint_stamps) < 0)[0]
-        breaks.update(int(rows[k + 1]) for k in backwards)
-    edges = [0, *sorted(breaks), len(stamps)]
+    """Message index ranges [start, stop) of the segments: a new one after each time reset (the
+    node's stamp rules, :mod:`neforward_ros.estimation.timeline`, sorted them out when reading)."""
+    edges = [0, *(int(k) for k in recording.report.segment_starts), len(recording.stamps)]
     return [(a, b) for a, b in itertools.pairwise(edges) if b > a]
 
 

@@ -16,7 +16,7 @@ from typing import Any
 
 from neforward_ros.bag.arguments import STORAGES
 from neforward_ros.errors import InputError
-from neforward_ros.estimation.stream import StreamSettings
+from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.node.settings import NodeSettings, node_settings
 
 

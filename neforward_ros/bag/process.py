@@ -38,9 +38,9 @@ def process_bag(
             output that exists already.
         ModelError: an invalid URDF.
     """
-    settings = options.settings
     started = time.monotonic()
     options = options if options is not None else BagOptions()
+    settings = options.settings
     check_options(options)
     progress = progress if progress is not None else Progress(False)
     source, output = Path(input_path), Path(output_path)
@@ -134,12 +134,16 @@ def process_bag(
         progress("finishing", 0.0)
         written_recording = recording_writer.finish()
         finals = [Path(p) for p in (csv_path, plot_path) if p is not None]
-        # All outputs appear together: an interrupt now waits until they are in place.
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
+        # All outputs appear together: an interrupt now waits until they are in place, and one that
+        # came meanwhile changes nothing more (the run is done: taken, not acted on).
+        stops = {signal.SIGINT, signal.SIGTERM}
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, stops)
         try:
             for partial, final in zip(partials, finals, strict=True):
                 partial.rename(final)
             written_recording.rename(output)
+            for pending in signal.sigpending() & stops:
+                signal.sigwait({pending})
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         progress("finishing", 1.0)

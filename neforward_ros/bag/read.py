@@ -13,8 +13,12 @@ from neforward_ros.bag.base import BaseSamples, read_base
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.report import BagReport
 from neforward_ros.errors import InputError, ModelError
+from neforward_ros.estimation.joint_messages import describe_names, name_map
+from neforward_ros.estimation.timeline import sort_out
+from neforward_ros.logs import ThrottledLog
 from neforward_ros.model import RobotModel, load_model
 from neforward_ros.node import topics
+from neforward_ros.stamps import NS
 from neforward_ros.wire import cdr
 
 
@@ -41,10 +45,11 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
         raise InputError(f"{source} is not a readable rosbag2 recording: {exc}") from exc
     try:
         topic = _joint_states_topic(reader, options.joint_states_topic, source)
-        model = _model(reader, options.urdf, settings.root_link, settings.robot_description)
+        warnings: list[str] = []
+        model = _model(reader, options.urdf, settings.root_link, settings.robot_description, warnings.append)
         connections = [c for c in reader.connections if c.topic == topic]
         total = max(sum(c.msgcount for c in connections), 1)
-        report = BagReport(joint_states_topic=topic, messages=0)
+        report = BagReport(joint_states_topic=topic, messages=0, notes=warnings)
         raws: list[bytes] = []
         log_times: list[int] = []
         try:
@@ -62,20 +67,53 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
         progress("reading", 1.0)
     finally:
         reader.close()
-    # Malformed messages (names and positions of different lengths) are dropped, as the node drops them.
+    # The node's rules for each message: malformed ones (names and positions of different lengths,
+    # a name given twice) are dropped, and the stamps sorted out (strays dropped, time resets begin
+    # segments, a zero stamp among stamped ones dropped; in a stream without stamps the recording
+    # time stands in for them).
     keep = np.ones(len(raws), dtype=bool)
     keep[decoded.malformed] = False
-    stamps, times = decoded.stamps[keep], np.asarray(log_times, dtype=np.int64)[keep]
-    renumber = np.cumsum(keep) - 1
-    zero = stamps == 0
-    report.zero_stamps = int(np.count_nonzero(zero))
-    stamps[zero] = times[zero]  # no stamp: the recording time, as the node uses the receive time
+    ignored = frozenset(model.mimic_joint_names)
+    joints_of: list[tuple[int, ...]] = [()] * len(raws)
+    unknown: dict[str, None] = {}
+    pairs: dict[tuple[str, ...], tuple[tuple[int, int], ...]] = {}
+    for names, (indices, *_) in decoded.groups.items():
+        mapped = name_map(names, model.joint_index, ignored)
+        if mapped.duplicate is not None:
+            keep[indices] = False
+            report.notes.append(f"{len(indices)} message(s) name joint {mapped.duplicate!r} more than once: dropped")
+            continue
+        unknown.update(dict.fromkeys(mapped.unknown))
+        pairs[names] = mapped.pairs
+        message_joints = tuple(j for _, j in mapped.pairs)
+        for m in indices.tolist():
+            joints_of[m] = message_joints
+    times = np.asarray(log_times, dtype=np.int64)
+    gap_ns = round(settings.estimator.max_gap * NS)
+    usable = np.flatnonzero(keep & np.array([bool(j) for j in joints_of], dtype=bool))
+    said: list[str] = []
+    log = ThrottledLog(lambda level, message: said.append(message), period=float("inf"))
+    kept, used, segment = sort_out(
+        decoded.stamps[usable], times[usable], [joints_of[m] for m in usable], len(model.joint_names), gap_ns, log
+    )
+    chosen = usable[kept]
+    if len(chosen) < len(raws):
+        report.notes.append(
+            f"{len(raws) - len(chosen)} joint state message(s) dropped by the node's rules (malformed, naming no "
+            f"joint of the model, or out of line with the stream's stamps); the first of each kind:"
+        )
+    report.notes += said
+    report.zero_stamps = int(np.count_nonzero(decoded.stamps[chosen] <= 0))
+    renumber = np.full(len(raws), -1, dtype=np.int64)
+    renumber[chosen] = np.arange(len(chosen))
+    stamps, times = used[kept], times[chosen]
     report.messages = len(stamps)
     if not len(stamps):
-        what = "no messages" if not raws else f"only malformed messages ({len(raws)})"
+        what = "no messages" if not raws else f"no usable messages ({len(raws)}: malformed, or naming no joint)"
         raise InputError(f"{topic} in {source} has {what}: nothing to compute")
-    columns, unknown = _columns(model, decoded, renumber)
-    report.ignored_names = sorted(unknown)
+    columns = _columns(decoded, renumber, pairs)
+    report.ignored_names = describe_names(unknown, "names") if unknown else ""
+    report.segment_starts = np.flatnonzero(np.diff(segment[kept]) != 0) + 1
     missing = [model.joint_names[j] for j in range(len(model.joint_names)) if j not in columns]
     if missing and settings.publish_policy == "wait":
         raise InputError(
@@ -87,29 +125,25 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
 
 
 def _columns(
-    model: RobotModel, decoded: cdr.JointStateBatch, renumber: np.ndarray
-) -> tuple[dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]], set[str]]:
-    """Per model joint: (message indices, positions, velocities or NaN, efforts or NaN), from messages
-    grouped by names."""
-    known = model.joint_index
-    ignored = set(model.mimic_joint_names)
+    decoded: cdr.JointStateBatch, renumber: np.ndarray, pairs: dict[tuple[str, ...], tuple[tuple[int, int], ...]]
+) -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Per model joint: (message indices among the kept ones, positions, velocities or NaN, efforts or
+    NaN), from the messages grouped by names; ``renumber`` maps a message to its kept index (-1:
+    dropped), ``pairs`` a list of names to its (position in the message, joint index) pairs."""
     parts: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = {}
-    unknown: set[str] = set()
     for names, (indices, positions, velocities, efforts) in decoded.groups.items():
         rows = renumber[indices]
-        for k, name in enumerate(names):
-            j = known.get(name)
-            if j is None:
-                if name not in ignored:
-                    unknown.add(name)
-                continue
-            parts.setdefault(j, []).append((rows, positions[:, k], velocities[:, k], efforts[:, k]))
-    columns = {}
+        kept = rows >= 0
+        if names not in pairs or not kept.any():
+            continue
+        for k, j in pairs[names]:
+            parts.setdefault(j, []).append((rows[kept], positions[kept, k], velocities[kept, k], efforts[kept, k]))
+    out = {}
     for j, pieces in parts.items():
         rows, qs, vs, es = (np.concatenate(x) for x in zip(*pieces, strict=True))
         order = np.argsort(rows, kind="stable")
-        columns[j] = (rows[order], qs[order], vs[order], es[order])
-    return columns, unknown
+        out[j] = (rows[order], qs[order], vs[order], es[order])
+    return out
 
 
 def _joint_states_topic(reader: Any, wanted: str | None, source: Path) -> str:
@@ -131,11 +165,16 @@ def _joint_states_topic(reader: Any, wanted: str | None, source: Path) -> str:
     return candidates[0]
 
 
-def _model(reader: Any, urdf: str | None, root_link: str | None = None, description: str = "") -> RobotModel:
+def _model(
+    reader: Any, urdf: str | None, root_link: str | None, description: str, warn: Callable[[str], None]
+) -> RobotModel:
+    def log(level: int, message: str) -> None:
+        warn(message)
+
     if urdf is not None:
-        return load_model(urdf, root_link=root_link)
+        return load_model(urdf, root_link=root_link, log=log)
     if description:  # the robot_description parameter of a params file
-        return load_model(description, root_link=root_link)
+        return load_model(description, root_link=root_link, log=log)
     connections = [
         c for c in reader.connections if c.msgtype == topics.STRING_TYPE and c.topic.endswith("robot_description")
     ]
@@ -148,6 +187,6 @@ def _model(reader: Any, urdf: str | None, root_link: str | None = None, descript
             "no --urdf given and no robot_description topic in the recording: give the URDF with --urdf FILE"
         )
     try:
-        return load_model(text, root_link=root_link)
+        return load_model(text, root_link=root_link, log=log)
     except ModelError as exc:
         raise ModelError(f"the recording's robot_description: {exc}") from exc

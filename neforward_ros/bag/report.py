@@ -5,7 +5,9 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
+from neforward_ros import terminal
 from neforward_ros.stamps import NS
 
 
@@ -31,7 +33,8 @@ class BagReport:
     samples_out: int = 0
     segments: list[Segment] = field(default_factory=list)
     zero_stamps: int = 0
-    ignored_names: list[str] = field(default_factory=list)
+    ignored_names: str = ""  # a bounded line: the count and a few examples
+    segment_starts: Any = ()  # indices of the messages (as kept) that begin a new segment
     missing_joints: list[str] = field(default_factory=list)
     contacts: list[tuple[float, float | None]] = field(default_factory=list)  # s since the first joint state
     notes: list[str] = field(default_factory=list)
@@ -57,6 +60,7 @@ class Progress:
         self._last = now
         filled = int(30 * min(max(fraction, 0.0), 1.0))
         sys.stderr.write(f"\r{what:<12} [{'#' * filled}{'.' * (30 - filled)}] {100 * fraction:5.1f}%")
+        terminal.line_left_open(fraction < 1.0)
         if fraction >= 1.0:
             sys.stderr.write("\n")
             self._finished = what
@@ -71,7 +75,8 @@ def describe(report: BagReport) -> str:
     ]
     if len(report.segments) > 1:
         lines.append(
-            f"{len(report.segments)} segments (stamps went backwards between them), each estimated on its own:"
+            f"{len(report.segments)} segments (time went back between them and went on from there), each estimated "
+            "on its own:"
         )
     for number, segment in enumerate(report.segments, 1):
         span = (segment.last_ns - segment.first_ns) / NS
@@ -82,7 +87,9 @@ def describe(report: BagReport) -> str:
             note += f"; {segment.note}"
         lines.append(f"  segment {number}: {segment.messages} messages over {span:.3f} s{note}")
     if report.zero_stamps:
-        lines.append(f"{report.zero_stamps} messages had a zero header.stamp: their recording time was used")
+        lines.append(
+            f"{report.zero_stamps} messages had a zero header.stamp (none had one): their recording time was used"
+        )
     for start, end in report.contacts:
         until = f"to {end:.3f} s" if end is not None else "to the end"
         lines.append(f"contact: from {start:.3f} s {until} (since the first joint state)")
@@ -90,5 +97,5 @@ def describe(report: BagReport) -> str:
     if report.missing_joints:
         lines.append(f"joints of the model never in the recording: {', '.join(report.missing_joints)}")
     if report.ignored_names:
-        lines.append(f"ignored joint names not in the model: {', '.join(report.ignored_names)}")
+        lines.append(f"ignored, not joints of the model: {report.ignored_names}")
     return "\n".join(lines)

@@ -23,7 +23,7 @@ from cyclonedds.util import duration
 from neforward_ros.dds.graph import GraphAnnouncer
 from neforward_ros.dds.qos import default_qos, latched_qos, participant_qos
 from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
-from neforward_ros.logs import LogFunction, ThrottledLog
+from neforward_ros.logs import BoundedLog, LogFunction, ThrottledLog, python_log
 from neforward_ros.node import topics
 from neforward_ros.node.handlers import MessageHandlers, decode_clock_ns
 from neforward_ros.node.names import NodeNames
@@ -60,6 +60,7 @@ class DdsNode:
         log: LogFunction | None = None,
     ) -> None:
         self.names = names if names is not None else NodeNames()
+        log = BoundedLog(log if log is not None else python_log())
         self._log = ThrottledLog(log)
         self.pipeline = Pipeline(settings, log=log)
         self.participant = DomainParticipant(domain_id, qos=participant_qos())

@@ -25,7 +25,7 @@ import numpy as np
 
 from neforward_ros.demo.robot import demo_trajectory
 from neforward_ros.errors import NeforwardError
-from neforward_ros.estimation.stream import StreamSettings
+from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.model import RobotModel, load_model
 from neforward_ros.node import topics
 from neforward_ros.recursion import forward_recursion
@@ -109,6 +109,15 @@ class DemoRun:
     def __init__(self, view: _View, sent: int, rate: float, first_ns: int, settings: StreamSettings) -> None:
         self.view, self.sent, self.rate, self.first_ns, self.settings = view, sent, rate, first_ns, settings
 
+    @property
+    def node_counts(self) -> tuple[int, int] | None:
+        """(messages in, results out) as the node said when it stopped; None if it did not say."""
+        for line in reversed(self.view.node_log.splitlines()):
+            if "stopped:" in line:
+                words = line.split("stopped:")[1].split()
+                return int(words[0]), int(words[3])
+        return None
+
     def exact_peaks(self) -> dict[str, np.ndarray]:
         """Per link, the peaks of |a| (kinematic), |alpha| and COM |a| at the true joint states of the
         stamps the node answered, from the batched recursion."""
@@ -156,7 +165,12 @@ def run_demo(
         command += ["-p", f"estimator.lag:={float(settings.lag)!r}"]
     if root_link:
         command += ["-p", f"root_link:={root_link}"]
-    node = subprocess.Popen(command, env=os.environ.copy(), stdout=node_log, stderr=subprocess.STDOUT)
+    # The demo stops its node with SIGINT: the node gets it at its default even where the demo itself
+    # runs with it ignored (a background job).
+    node = subprocess.Popen(
+        command, env=os.environ.copy(), stdout=node_log, stderr=subprocess.STDOUT,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )  # fmt: skip
     participant = DomainParticipant(domain)
     joint_state = topics.JOINT_STATE_TYPE
     writer = DataWriter(
@@ -164,7 +178,10 @@ def run_demo(
     )
     link_type = topics.LINK_STATES_TYPE
     readers = {
-        name: raw_reader(participant, f"rt/neforward/{name}", link_type, default_qos(link_type, depth=100))
+        # deep enough for every result of the run: what the node sends, the view gets, however busy it is
+        name: raw_reader(
+            participant, f"rt/neforward/{name}", link_type, default_qos(link_type, depth=int(seconds * rate) + 100)
+        )
         for name in ("link_states", "com_states")
     }
     waitset = WaitSet(participant)

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from neforward_ros.estimation.stream import StreamingEstimator, StreamSettings
+from neforward_ros.estimation.settings import StreamSettings
+from neforward_ros.estimation.stream import StreamingEstimator
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.rotations import rotation_matrix
 from neforward_ros.stamps import NS

@@ -18,7 +18,9 @@ import numpy as np
 from neforward_ros.base import base_from_link, link_pose
 from neforward_ros.dynamics import split_values, wrenches_from_table
 from neforward_ros.errors import ModelError
-from neforward_ros.estimation.stream import JointEstimate, StreamingEstimator
+from neforward_ros.estimation.estimate import JointEstimate
+from neforward_ros.estimation.joint_messages import JointMessageReader
+from neforward_ros.estimation.stream import StreamingEstimator
 from neforward_ros.kernel import kernel_of
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel, load_model
@@ -76,7 +78,7 @@ class Pipeline:
             if not is_token(link):
                 raise ModelError(f"link {link!r} cannot be part of a ROS 2 topic name (letters, digits, _)")
         if settings.robot_description:
-            self.set_model(load_model(settings.robot_description, root_link=settings.root_link), "parameter")
+            self.set_model(load_model(settings.robot_description, root_link=settings.root_link, log=log), "parameter")
         else:
             self._log.once(
                 "waiting",
@@ -90,7 +92,7 @@ class Pipeline:
         """Replace the model with one parsed from URDF text. An invalid one is logged and the previous
         model kept. Returns whether the model was replaced."""
         try:
-            model = load_model(urdf, root_link=self.settings.root_link)
+            model = load_model(urdf, root_link=self.settings.root_link, log=self._log_function)
         except Exception as exc:  # ModelError, or a URDF parser that cannot be imported
             kept = "keeping the previous model" if self.model is not None else "still waiting for a valid one"
             self._log.log(logging.ERROR, f"invalid robot description from the {source}: {exc}; {kept}")
@@ -142,6 +144,7 @@ class Pipeline:
             self._log.log(logging.ERROR, f"base.link {settings.base_link!r} is not a link of robot {model.name!r}")
         kernel_of(model)  # generate the recursion now, not while the first joint states wait
         self.model = model
+        self._supplied_names = JointMessageReader(model.joint_names, model.mimic_joint_names, self._log)
         self._estimator = StreamingEstimator(
             model.joint_names,
             wrap=model.continuous_columns,
@@ -278,16 +281,18 @@ class Pipeline:
                 f"{'/'.join(str(len(f)) for f in fields)} positions/velocities/accelerations",
             )
             return None
+        mapped = self._supplied_names.names(names)
+        if mapped.duplicate is not None:
+            self._log.every(
+                "supplied-duplicate",
+                logging.WARNING,
+                f"joint trajectory point rejected: it names joint {mapped.duplicate!r} more than once",
+            )
+            return None
         state = np.full((3, len(model.joint_names)), np.nan)
         efforts = np.full(len(model.joint_names), np.nan)
         with_effort = len(point.efforts) == count
-        ignored = set(model.mimic_joint_names)
-        for k, name in enumerate(names):
-            j = model.joint_index.get(name)
-            if j is None:
-                if name not in ignored:
-                    self._log.once(("unknown", name), logging.WARNING, f"joint trajectory names unknown joint {name!r}")
-                continue
+        for k, j in mapped.pairs:
             state[:, j] = [float(f[k]) for f in fields]
             if with_effort:
                 efforts[j] = float(point.efforts[k])
@@ -369,7 +374,7 @@ class Pipeline:
         if index is None or (determined is not None and not determined[index]):
             why = "not a link of the model" if index is None else "a joint above it has no estimate"
             self._log.every(
-                ("base-link", link),
+                "base-link",
                 logging.WARNING,
                 f"nothing published: the base source measures link {link!r}, {why} (set base.link)",
             )

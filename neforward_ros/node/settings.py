@@ -17,7 +17,7 @@ from typing import Any
 from neforward_ros.errors import InputError
 from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW
 from neforward_ros.estimation.motion import KalmanSettings
-from neforward_ros.estimation.stream import (
+from neforward_ros.estimation.settings import (
     DEFAULT_KALMAN_LAG,
     DEFAULT_MAX_GAP,
     METHODS,
@@ -190,7 +190,13 @@ PARAMETERS: tuple[Parameter, ...] = (
         "Prefix of every frame_id, as robot_state_publisher's frame_prefix.",
         read_only=False,
     ),
-    Parameter("qos_depth", "int", 10, "Keep-last depth of the joint_states and joint_states_accel subscriptions."),
+    Parameter(
+        "qos_depth",
+        "int",
+        500,
+        "Keep-last depth of the input subscriptions (joint states, supplied states, base): 500 holds 0.5 s of a "
+        "1 kHz stream, so that a stall of the node (a model reload, the machine busy) loses nothing.",
+    ),
 )
 """Every parameter, in README order. ROS 2's own (``use_sim_time``, ...) and ``qos_overrides.*`` are not listed."""
 
@@ -268,7 +274,7 @@ class NodeSettings:
     publish_markers: bool = False
     marker_scale: float = 0.02
     frame_prefix: str = ""
-    qos_depth: int = 10
+    qos_depth: int = 500
     qos_overrides: Mapping[tuple[str, str], QosOverride] = field(default_factory=dict)
 
     @property

@@ -131,9 +131,12 @@ class Process:
         self.command = command
         self.log_path = log_path
         self._log = open(log_path, "w")
+        # SIGINT at its default whatever the suite inherited (a background job of a non-interactive
+        # shell ignores it): interrupt() sends it as a terminal's Ctrl-C would.
         self.popen = subprocess.Popen(
-            command, stdout=self._log, stderr=subprocess.STDOUT, env=environment, cwd=cwd, start_new_session=True
-        )
+            command, stdout=self._log, stderr=subprocess.STDOUT, env=environment, cwd=cwd, start_new_session=True,
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+        )  # fmt: skip
 
     def log(self) -> str:
         return self.log_path.read_text(errors="replace")

@@ -369,7 +369,8 @@ def test_best_effort_joint_states_connect_with_the_qos_override(graph, tmp_path)
         )  # fmt: skip
         node.wait_for("model 'panda'")
         received = graph.client({**plan, "expect": 60})
-        assert len(received["/neforward/link_states"]) >= 30, (command, len(received["/neforward/link_states"]))
+        # connected: results come (best effort guarantees no count, and a busy machine drops some)
+        assert len(received["/neforward/link_states"]) >= 1, (command, len(received["/neforward/link_states"]))
         assert node.interrupt() == 0
 
 

@@ -1,0 +1,186 @@
+"""The recent samples of a group of joints that arrive together (one driver's), kept for the fits."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from neforward_ros.estimation.kalman import KalmanTrack
+from neforward_ros.stamps import NS
+
+
+class JointHistory:
+    """Joints that have received exactly the same stamps since their histories last restarted (one
+    driver's joints): their samples share one buffer and are fitted together.
+
+    Attributes:
+        joints: the joints' indices in the estimator, in the order of the buffer's columns.
+        origin: the segment's first stamp; ``seconds`` are counted from it.
+    """
+
+    __slots__ = (
+        "_efforts",
+        "_positions",
+        "_seconds",
+        "_stamps",
+        "_velocities",
+        "any_effort",
+        "end",
+        "holes",
+        "intervals",
+        "joints",
+        "last_without_velocity",
+        "origin",
+        "slots",
+        "start",
+        "track",
+        "warming",
+    )
+
+    def __init__(self, joints: list[int], origin: int, capacity: int = 256, track: KalmanTrack | None = None) -> None:
+        self.joints = joints
+        self.track = track
+        self.holes: list[int] = []  # stamps of samples more than the support's max_hole after the previous one
+        self.intervals: deque[int] = deque(maxlen=8)  # the last intervals between samples, ns
+        self.warming: bool | str = False  # whether the current warm-up has been logged ("sparse": warned)
+        self.slots = {j: k for k, j in enumerate(joints)}
+        self.origin = origin
+        self._stamps = np.empty(capacity, dtype=np.int64)
+        self._seconds = np.empty(capacity)
+        self._positions = np.empty((capacity, len(joints)))
+        self._velocities = np.empty((capacity, len(joints)))
+        self._efforts = np.empty((capacity, len(joints)))
+        self.any_effort = False  # whether a message ever gave an effort for these joints
+        self.start = 0
+        self.end = 0
+        self.last_without_velocity = -1  # buffer index of the newest sample that had no velocity at all
+
+    def __len__(self) -> int:
+        return self.end - self.start
+
+    @property
+    def stamps(self) -> np.ndarray:
+        return self._stamps[self.start : self.end]
+
+    @property
+    def seconds(self) -> np.ndarray:
+        """The stamps as seconds since the segment's first stamp."""
+        return self._seconds[self.start : self.end]
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(count, joints)."""
+        return self._positions[self.start : self.end]
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(count, joints), NaN where a message gave none."""
+        return self._velocities[self.start : self.end]
+
+    @property
+    def efforts(self) -> np.ndarray:
+        """(count, joints), NaN where a message gave none."""
+        return self._efforts[self.start : self.end]
+
+    def end_slack(self) -> int | None:
+        """How far, ns, an estimate's support may reach past this group's newest sample: one and a half
+        of its longest recent sample intervals (a jittered sample comes a little late)."""
+        return 3 * max(self.intervals) // 2 if self.intervals else None
+
+    def velocities_everywhere_after(self, index: int) -> bool:
+        """Whether every sample from ``index`` (in the views above) on has some velocity."""
+        return self.last_without_velocity < self.start + index
+
+    @property
+    def newest_stamp(self) -> int:
+        return int(self._stamps[self.end - 1])
+
+    def newest_position(self, joint: int) -> float:
+        return float(self._positions[self.end - 1, self.slots[joint]])
+
+    def append(
+        self, stamp_ns: int, positions: list[float], velocities: list[float], efforts: list[float], max_hole_ns: int
+    ) -> None:
+        if self.end == len(self._stamps):
+            count = len(self)
+            arrays = ("_stamps", "_seconds", "_positions", "_velocities", "_efforts")
+            if count > len(self._stamps) // 2:
+                for name in arrays:
+                    old = getattr(self, name)
+                    setattr(self, name, np.concatenate([old, np.empty_like(old)]))
+            for name in arrays:
+                array = getattr(self, name)
+                array[:count] = array[self.start : self.end]
+            self.last_without_velocity -= self.start
+            self.start, self.end = 0, count
+        end = self.end
+        if end > self.start:
+            interval = stamp_ns - int(self._stamps[end - 1])
+            if interval > max_hole_ns:
+                self.holes.append(stamp_ns)
+            else:
+                self.intervals.append(interval)
+        self._stamps[end] = stamp_ns
+        self._seconds[end] = (stamp_ns - self.origin) / NS
+        self._positions[end] = positions
+        self._velocities[end] = velocities
+        self._efforts[end] = efforts
+        if not self.any_effort and any(e == e for e in efforts):  # not all NaN
+            self.any_effort = True
+        if all(v != v for v in velocities):  # all NaN
+            self.last_without_velocity = end
+        self.end = end + 1
+        if self.track is not None:
+            self.track.add(stamp_ns, self._positions[end], self._velocities[end])
+
+    def drop_before(self, stamp_ns: int, keep: int) -> None:
+        """Forget samples older than stamp_ns, keeping at least the newest ``keep``."""
+        first = self.start + int(np.searchsorted(self.stamps, stamp_ns, side="left"))
+        self.start = min(first, max(self.start, self.end - keep))
+        oldest = int(self._stamps[self.start])
+        if self.holes and self.holes[0] <= oldest:
+            self.holes = [h for h in self.holes if h > oldest]
+
+    def split(self, joints: list[int]) -> JointHistory:
+        """Move these joints, with their history, into a group of their own; returns it."""
+        columns = [self.slots[j] for j in joints]
+        track = self.track.select(columns) if self.track is not None else None
+        moved = JointHistory(joints, self.origin, capacity=max(len(self._stamps), 16), track=track)
+        count = len(self)
+        moved._stamps[:count] = self.stamps
+        moved._seconds[:count] = self.seconds
+        moved._positions[:count] = self.positions[:, columns]
+        moved._velocities[:count] = self.velocities[:, columns]
+        moved._efforts[:count] = self.efforts[:, columns]
+        moved.any_effort = self.any_effort
+        moved.end = count
+        moved.holes = list(self.holes)
+        moved.intervals = self.intervals.copy()
+        # -1 claims nothing: the velocities of its first windows are checked sample by sample
+        moved.last_without_velocity = -1
+        self.remove(joints)
+        return moved
+
+    def remove(self, joints: list[int]) -> None:
+        """Forget these joints."""
+        keep = [j for j in self.joints if j not in joints]
+        columns = [self.slots[j] for j in keep]
+        if self.track is not None:
+            self.track = self.track.select(columns)
+        self._positions = self._positions[:, columns].copy()
+        self._velocities = self._velocities[:, columns].copy()
+        self._efforts = self._efforts[:, columns].copy()
+        self.joints = keep
+        self.slots = {j: k for k, j in enumerate(keep)}
+
+    def effort_at(self, k: int, target: int) -> np.ndarray:
+        """The efforts at the target: sample k's at its stamp, else interpolated between k and k + 1
+        when there is a sample after (NaN otherwise, and where a message gave none)."""
+        efforts = self.efforts
+        stamps = self.stamps
+        before = int(stamps[k])
+        if target == before or k + 1 >= len(stamps):
+            return efforts[k] if target == before else np.full(len(self.joints), np.nan)
+        weight = (target - before) / (int(stamps[k + 1]) - before)
+        return efforts[k] + weight * (efforts[k + 1] - efforts[k])
