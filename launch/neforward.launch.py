@@ -6,9 +6,10 @@
 
 The file is given to the node as its robot_description parameter, the way robot_state_publisher is
 usually launched (a whole URDF on the command line, -p robot_description:=..., is rejected by rcl's
-argument parser for typical files). A ``.xacro`` file, or a file that declares the xacro namespace,
-is expanded with xacro first: its warnings are shown and do not stop the launch, and paths may
-contain spaces. A plain URDF is read as it is and needs no xacro.
+argument parser for typical files). A ``.xacro`` file, or a file that uses xacro (the node's rule:
+``neforward_ros.model.xacro``; declaring the namespace, as xacro's own output does, is not using it),
+or one given ``xacro_args``, is expanded with xacro first: its warnings are shown and do not stop the
+launch, and paths may contain spaces. A plain URDF is read as it is and needs no xacro.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ def robot_description(path: str, xacro_args: str = "") -> str:
         raise RuntimeError(f"urdf:={path}: no such file")
     with open(path, encoding="utf-8") as stream:
         text = stream.read()
-    if not (path.endswith(".xacro") or "xmlns:xacro" in text):
+    if not (path.endswith(".xacro") or xacro_args.strip() or _uses_xacro(text)):
         return text
     arguments = [path, *shlex.split(xacro_args)]
     executable = shutil.which("xacro")
@@ -52,6 +53,17 @@ def robot_description(path: str, xacro_args: str = "") -> str:
     if done.returncode != 0:
         raise RuntimeError(f"xacro failed on {path} (exit code {done.returncode})")
     return done.stdout
+
+
+def _uses_xacro(text: str) -> bool:
+    from neforward_ros.errors import ModelError
+    from neforward_ros.model.xacro import xacro_use
+    from neforward_ros.model.xml_tree import parse_xml
+
+    try:
+        return xacro_use(parse_xml(text)).needed is not None
+    except ModelError:  # not XML: the node says what is wrong with it
+        return False
 
 
 def _node(context: LaunchContext) -> list[Node]:

@@ -447,3 +447,69 @@ def test_a_base_imu_moves_the_quadruped(start, domain) -> None:
     error = np.sqrt(np.mean((got - truth.accel) ** 2) / np.mean(truth.accel**2))
     assert error <= 2e-2, error
     assert "Traceback" not in node.log()
+
+
+def test_malformed_messages_mixed_into_a_good_stream_cost_no_good_output(start, domain) -> None:
+    """The node, over the wire, fed a moving robot's joint states at 200 Hz for 5 s with every kind of
+    malformed message mixed in: it stays up, publishes only finite numbers, answers the good messages
+    with right values (all but the estimator's first and last 0.1 s), and its log stays short."""
+    from test_bag import trajectory
+
+    node = start("--ros-args", "-p", "publish_torques:=true")  # the model from the topic
+    peer = Peer(domain)
+    peer.writer("/joint_states", topics.JOINT_STATE_TYPE)
+    peer.writer("/robot_description", topics.STRING_TYPE, latched=True)
+    peer.reader("/neforward/link_states", topics.LINK_STATES_TYPE)
+    peer.wait_connected(node)
+    peer.write("/robot_description", {"data": PANDA.read_text()})
+    deadline = time.monotonic() + 30
+    while "model 'panda'" not in node.log() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    count, rate = 1000, 200.0
+    t = (np.arange(count) + np.random.default_rng(5).uniform(-0.1, 0.1, count)) / rate
+    q, qd, _ = trajectory(t)
+    stamps = [EPOCH + round(x * 1e9) for x in t]
+    good = [joint_state(s, NAMES, q[k].tolist(), qd[k].tolist()) | {"effort": [0.5] * 8} for k, s in enumerate(stamps)]
+    nan = float("nan")
+    bad = {  # before good message k
+        50: joint_state(stamps[50] - 1, NAMES, [nan] * 8),
+        100: joint_state(stamps[100] - 1, NAMES, [float("inf")] * 8),
+        150: joint_state(stamps[150] - 1, NAMES, [0.0] * 3),
+        200: joint_state(stamps[200] - 1, ["ghost", "phantom"], [1.0, 2.0]),
+        250: joint_state(stamps[250] - 1, [*NAMES, NAMES[2]], [0.0] * 9),
+        300: joint_state(stamps[300] - 1, [], []),
+        350: joint_state(stamps[350] - 1, NAMES, q[350].tolist(), [0.0] * 3),
+        400: joint_state(stamps[400] - 1, NAMES, q[400].tolist()) | {"effort": [nan] * 8},
+        450: joint_state(stamps[450] - 5 * 10**9, NAMES, [9.0] * 8),
+        500: joint_state(stamps[500] - 1, [f"j{i}" for i in range(20_000)], [0.0] * 20_000),
+        550: joint_state(0, NAMES, [7.0] * 8),
+    }
+    received: dict[str, list[bytes]] = {"/neforward/link_states": []}
+    started = time.monotonic()
+    for k, message in enumerate(good):
+        delay = started + k / rate - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        if k in bad:
+            peer.write("/joint_states", bad[k])
+        if k == 600:
+            peer.write("/robot_description", {"data": "<robot name='broken'><link name='a'>"})
+        peer.write("/joint_states", message)
+        received["/neforward/link_states"] += peer.take("/neforward/link_states")
+    answered = count - 40  # the first and last 0.1 s have no estimate
+    collect(peer, received, lambda r: len(r["/neforward/link_states"]) >= answered)
+    assert node.alive()
+    points = [cdr.decode_multi_dof(raw) for raw in received["/neforward/link_states"]]
+    assert all(np.isfinite(p.accelerations).all() and np.isfinite(p.transforms).all() for p in points)
+    by_stamp = {p.stamp_ns: p for p in points}
+    good_answered = [k for k, s in enumerate(stamps) if s in by_stamp]
+    assert len(good_answered) >= 0.95 * count, len(good_answered)
+    assert set(by_stamp) <= set(stamps) | {stamps[350] - 1, stamps[400] - 1}  # partial good samples
+    index = np.array(good_answered)
+    kin = forward_recursion(MODEL, *trajectory(t[index])).in_root()
+    got = np.array([by_stamp[stamps[k]].accelerations[:, :3] for k in index])
+    error = np.sqrt(np.mean((got - kin.accel) ** 2)) / np.sqrt(np.mean(kin.accel**2))
+    assert error <= 1e-2, error
+    lines = node.log().count("\n")
+    assert lines < 60, node.log()
+    assert "invalid robot description" in node.log() and "Traceback" not in node.log()

@@ -160,12 +160,17 @@ class JointMessageReader:
         if math.isfinite(sum(position)):  # the usual case: every position is a number (inf - inf is NaN)
             return [(j, position[k], velocity[k], effort[k]) for k, j in mapped.pairs]
         samples = []
+        dropped = []
         for k, j in mapped.pairs:
-            if not math.isfinite(position[k]):
-                name = self._names[j]  # a model joint: one key each, a bounded number
-                self._log.every(("nan", name), logging.WARNING, f"joint {name!r}: non-finite position, sample dropped")
-                continue
-            samples.append((j, position[k], velocity[k], effort[k]))
+            if math.isfinite(position[k]):
+                samples.append((j, position[k], velocity[k], effort[k]))
+            else:
+                dropped.append(self._names[j])
+        self._log.every(
+            "nan-position",
+            logging.WARNING,
+            f"joint state with a non-finite position of {describe_names(dropped, 'joints')}: those samples dropped",
+        )
         return samples
 
     def _floats(self, values: Sequence[float], what: str, count: int) -> list[float] | None:
