@@ -46,6 +46,6 @@ setup(
     license="Apache-2.0",
     tests_require=["pytest"],
     entry_points={
-        "console_scripts": ["neforward = neforward_ros.cli:entry", "neforward_node = neforward_ros.node_entry:main"]
+        "console_scripts": ["neforward = neforward_ros.command:entry", "neforward_node = neforward_ros.node_entry:main"]
     },
 )

@@ -28,7 +28,7 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
 from neforward_ros import load_model
 from neforward_ros.bag import BagOptions, process_bag
-from neforward_ros.node import topics
+from neforward_ros.interface import topics
 from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr
 from neforward_ros.wire.rostypes import typestore

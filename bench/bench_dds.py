@@ -48,10 +48,10 @@ def echo_server() -> None:
     from cyclonedds.topic import Topic
     from cyclonedds.util import duration
 
-    from neforward_ros.dds.commands import domain_id
+    from neforward_ros.dds.domain import domain_id
     from neforward_ros.dds.qos import default_qos
     from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
-    from neforward_ros.node import topics
+    from neforward_ros.interface import topics
 
     typename = topics.JOINT_STATE_TYPE
     participant = DomainParticipant(domain_id())
@@ -83,7 +83,7 @@ def measure(peer_domain: int, output_topic: str, output_type: str, names: list[s
 
     from neforward_ros.dds.qos import default_qos
     from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
-    from neforward_ros.node import topics
+    from neforward_ros.interface import topics
     from neforward_ros.stamps import time_message
     from neforward_ros.wire import cdr
 
@@ -228,7 +228,7 @@ def main() -> None:
     from neforward_ros import load_model
     from neforward_ros.dds.loopback import use_loopback
     from neforward_ros.estimation.settings import StreamSettings
-    from neforward_ros.node import topics
+    from neforward_ros.interface import topics
 
     domain = use_loopback()
     rates = [float(r) for r in args.rates.split(",")]
@@ -251,7 +251,7 @@ def main() -> None:
                             process = start([sys.executable, __file__, "--echo-server"])
                             topic, typename = "rt/echo", topics.JOINT_STATE_TYPE
                         else:
-                            command = [sys.executable, "-m", "neforward_ros.cli", "run", "--urdf", str(path)]
+                            command = [sys.executable, "-m", "neforward_ros", "run", "--urdf", str(path)]
                             process = start([*command, "--ros-args", "-p", f"estimator.mode:={mode}"])
                             topic, typename = "rt/neforward/link_states", topics.LINK_STATES_TYPE
                         try:

@@ -109,9 +109,9 @@ def serialization(arguments: argparse.Namespace) -> None:
     from rosidl_runtime_py.set_message import set_message_fields
 
     from neforward_ros import load_model
-    from neforward_ros.node import messages, topics
-    from neforward_ros.node.result import make_result
-    from neforward_ros.recursion import kinematics_table, root_state
+    from neforward_ros.computation.result import make_result
+    from neforward_ros.interface import messages, topics
+    from neforward_ros.kinematics.forward import kinematics_table, root_state
     from neforward_ros.wire import cdr
 
     model = load_model(arguments.urdf)

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from neforward_ros import BaseMotion, forward_recursion, load_model
-from neforward_ros.node import topics
+from neforward_ros.interface import topics
 from neforward_ros.rotations import quaternions
 from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr

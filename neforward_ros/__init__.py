@@ -8,16 +8,17 @@ entry points do) does not import numpy and the whole core first.
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING, Any
+
+TYPE_CHECKING = False  # typing is not imported: the command line starts by importing this package
 
 _EXPORTS = {
-    "BaseMotion": "neforward_ros.recursion",
-    "DEFAULT_GRAVITY": "neforward_ros.recursion",
+    "BaseMotion": "neforward_ros.kinematics.forward",
+    "DEFAULT_GRAVITY": "neforward_ros.kinematics.forward",
     "InputError": "neforward_ros.errors",
-    "InverseDynamics": "neforward_ros.dynamics",
+    "InverseDynamics": "neforward_ros.kinematics.inverse_dynamics",
     "JointEstimate": "neforward_ros.estimation.estimate",
     "JointKind": "neforward_ros.model",
-    "LinkKinematics": "neforward_ros.recursion",
+    "LinkKinematics": "neforward_ros.kinematics.forward",
     "ModelError": "neforward_ros.errors",
     "NeforwardError": "neforward_ros.errors",
     "ParentJoint": "neforward_ros.model",
@@ -25,8 +26,8 @@ _EXPORTS = {
     "StreamSettings": "neforward_ros.estimation.settings",
     "StreamingEstimator": "neforward_ros.estimation.stream",
     "estimate_derivatives": "neforward_ros.estimation.batch",
-    "forward_recursion": "neforward_ros.recursion",
-    "inverse_dynamics": "neforward_ros.dynamics",
+    "forward_recursion": "neforward_ros.kinematics.forward",
+    "inverse_dynamics": "neforward_ros.kinematics.inverse_dynamics",
     "load_model": "neforward_ros.model",
 }
 
@@ -51,14 +52,16 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from neforward_ros.dynamics import InverseDynamics, inverse_dynamics
+    from typing import Any
+
     from neforward_ros.errors import InputError, ModelError, NeforwardError
     from neforward_ros.estimation.batch import estimate_derivatives
     from neforward_ros.estimation.estimate import JointEstimate
     from neforward_ros.estimation.settings import StreamSettings
     from neforward_ros.estimation.stream import StreamingEstimator
+    from neforward_ros.kinematics.forward import DEFAULT_GRAVITY, BaseMotion, LinkKinematics, forward_recursion
+    from neforward_ros.kinematics.inverse_dynamics import InverseDynamics, inverse_dynamics
     from neforward_ros.model import JointKind, ParentJoint, RobotModel, load_model
-    from neforward_ros.recursion import DEFAULT_GRAVITY, BaseMotion, LinkKinematics, forward_recursion
 
 
 def __getattr__(name: str) -> Any:

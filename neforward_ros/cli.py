@@ -115,6 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """The command; returns its exit status (130 after Ctrl-C, as shells count it)."""
+    _ctrl_c_raises()
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
         ros_args: list[str] = []
@@ -164,6 +165,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         terminal.say("neforward: interrupted")
         return 130
     return 0
+
+
+def _ctrl_c_raises() -> None:
+    """From here on a Ctrl-C raises KeyboardInterrupt, which every command cleans up after (until now
+    :mod:`neforward_ros.command` ended the process at once)."""
+    command = sys.modules.get("neforward_ros.command")
+    if command is not None and signal.getsignal(signal.SIGINT) is command.interrupted_early:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _interrupted(exc: BaseException) -> bool:

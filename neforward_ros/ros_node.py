@@ -27,13 +27,15 @@ from std_msgs.msg import String
 from trajectory_msgs.msg import JointTrajectory
 
 from neforward_ros.errors import NeforwardError
+from neforward_ros.interface.topics import IMU_TYPE, JOINT_STATES, JOINT_STATES_ACCEL, ODOMETRY_TYPE, ROBOT_DESCRIPTION
 from neforward_ros.logs import BoundedLog
 from neforward_ros.model import load_model
 from neforward_ros.node.handlers import MessageHandlers
 from neforward_ros.node.pipeline import Pipeline
-from neforward_ros.node.ros_args import ros_args_section
-from neforward_ros.node.settings import DEFAULTS, NODE_NAME, PARAMETERS, command_line_parameters, node_settings
-from neforward_ros.node.topics import IMU_TYPE, JOINT_STATES, JOINT_STATES_ACCEL, ODOMETRY_TYPE, ROBOT_DESCRIPTION
+from neforward_ros.parameters.files import command_line_parameters
+from neforward_ros.parameters.ros_args import ros_args_section
+from neforward_ros.parameters.settings import node_settings
+from neforward_ros.parameters.table import DEFAULTS, NODE_NAME, PARAMETERS
 
 OUTPUT_QOS_DEPTH = 10
 

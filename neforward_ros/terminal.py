@@ -4,7 +4,10 @@ written next (an error, "interrupted") starts on a line of its own."""
 from __future__ import annotations
 
 import sys
-from typing import TextIO
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from typing import TextIO
 
 _open = False
 

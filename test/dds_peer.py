@@ -31,7 +31,7 @@ class NodeProcess:
     def __init__(self, arguments: list[str], log_path: Path, environment: dict[str, str]) -> None:
         self.log_path = log_path
         self._log = open(log_path, "w")
-        command = [sys.executable, "-m", "neforward_ros.cli", "run", *arguments]
+        command = [sys.executable, "-m", "neforward_ros", "run", *arguments]
         # SIGINT at its default whatever the suite inherited: stop() sends it as Ctrl-C would
         self.process = subprocess.Popen(
             command, stdout=self._log, stderr=subprocess.STDOUT, env=environment,

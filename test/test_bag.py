@@ -11,7 +11,7 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
 from neforward_ros.bag import BagOptions, process_bag
 from neforward_ros.cli import main
-from neforward_ros.node import messages, topics
+from neforward_ros.interface import messages, topics
 from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr
 from neforward_ros.wire.rostypes import typestore
@@ -129,8 +129,8 @@ def test_outputs_match_pinocchio_on_the_analytic_trajectory(tmp_path, storage, v
 def test_batched_messages_equal_the_node_message_building(tmp_path) -> None:
     """The bag's vectorised encoding gives the same bytes as the node's per-message path."""
     from neforward_ros import load_model
-    from neforward_ros.node.result import make_result
-    from neforward_ros.recursion import kinematics_table, root_state
+    from neforward_ros.computation.result import make_result
+    from neforward_ros.kinematics.forward import kinematics_table, root_state
 
     model = load_model(PANDA)
     t = np.linspace(0.0, 1.0, 7)

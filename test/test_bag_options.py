@@ -11,7 +11,7 @@ from test_bag import PANDA, read_output, record
 
 from neforward_ros.cli import main
 from neforward_ros.node.pipeline import Pipeline
-from neforward_ros.node.settings import node_settings
+from neforward_ros.parameters.settings import node_settings
 from neforward_ros.wire import cdr
 from neforward_ros.wire.rostypes import typestore
 

@@ -12,10 +12,10 @@ import matplotlib.pyplot as plt
 from matplotlib.text import Text
 
 from neforward_ros.bag.plot import LEGEND_LINKS, OTHERS_COLOUR, PlotSeries, plot_figure
-from neforward_ros.dynamics import split_values, wrenches_from_table
+from neforward_ros.computation.result import Dynamics, make_result
+from neforward_ros.kinematics.forward import kinematics_table, root_state
+from neforward_ros.kinematics.inverse_dynamics import split_values, wrenches_from_table
 from neforward_ros.model import load_model
-from neforward_ros.node.result import Dynamics, make_result
-from neforward_ros.recursion import kinematics_table, root_state
 
 from conftest import CONFIG_DIR, TEST_DIR
 

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from neforward_ros import BaseMotion, forward_recursion, load_model
-from neforward_ros.node.base_source import BaseMessage
+from neforward_ros.computation.base_motion import BaseMessage
 from neforward_ros.node.pipeline import Pipeline
-from neforward_ros.node.settings import node_settings
+from neforward_ros.parameters.settings import node_settings
 from neforward_ros.rotations import quaternions
 
 from conftest import TEST_ROBOTS, LogRecorder

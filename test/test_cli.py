@@ -40,7 +40,7 @@ def test_table_fits_the_terminal(capsys, monkeypatch, columns) -> None:
 def test_help_version_and_defaults() -> None:
     def run(*arguments: str) -> str:
         done = subprocess.run(
-            [sys.executable, "-m", "neforward_ros.cli", *arguments], capture_output=True, text=True, check=True
+            [sys.executable, "-m", "neforward_ros", *arguments], capture_output=True, text=True, check=True
         )
         return done.stdout
 
@@ -51,7 +51,7 @@ def test_help_version_and_defaults() -> None:
     bag = " ".join(run("bag", "--help").split())
     assert "-p NAME:=VALUE" in bag and "--params FILE" in bag
     # the bag flags that stand for node parameters show the node's defaults
-    from neforward_ros.node.settings import DEFAULTS
+    from neforward_ros.parameters.table import DEFAULTS
 
     assert f"(default: {' '.join(f'{g:g}' for g in DEFAULTS['gravity'])})" in bag
     for name in ("estimator.method", "estimator.mode", "publish_policy", "base.source", "contact.debounce"):

@@ -23,7 +23,7 @@ from neforward_ros import forward_recursion, load_model
 from neforward_ros.dds.graph import DISCOVERY_TOPIC, DISCOVERY_TYPE
 from neforward_ros.dds.loopback import write_config
 from neforward_ros.dds.types import type_hash
-from neforward_ros.node import topics
+from neforward_ros.interface import topics
 from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr, rostypes
 
@@ -349,7 +349,7 @@ def test_ctrl_c_exits_cleanly_and_startup_errors_are_one_line(start, config_uri,
     ):
         (tmp_path / "bad.urdf").write_text("<robot name='x'><link name='a'>")
         result = subprocess.run(
-            [sys.executable, "-m", "neforward_ros.cli", "run", *arguments],
+            [sys.executable, "-m", "neforward_ros", "run", *arguments],
             capture_output=True, text=True, timeout=60, env=environment,
         )  # fmt: skip
         assert result.returncode == 1, result.stderr
@@ -363,7 +363,7 @@ def test_echo_prints_yaml_like_ros2_topic_echo(start, config_uri, domain) -> Non
     peer.wait_connected(node)
     environment = {**os.environ, "CYCLONEDDS_URI": config_uri, "ROS_DOMAIN_ID": str(domain)}
     echo = subprocess.Popen(
-        [sys.executable, "-m", "neforward_ros.cli", "echo", "/neforward/panda_hand/accel", "--count", "2"],
+        [sys.executable, "-m", "neforward_ros", "echo", "/neforward/panda_hand/accel", "--count", "2"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=environment,
     )  # fmt: skip
     try:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from neforward_ros import BaseMotion, InputError, forward_recursion, inverse_dynamics, load_model
-from neforward_ros.base import base_from_link
+from neforward_ros.kinematics.root_motion import base_from_link
 
 from conftest import TEST_ROBOTS, assert_close
 from oracle import GRAVITY, PinocchioOracle, pin

@@ -33,7 +33,7 @@ TIMEOUT = 120.0
 
 
 def command(*arguments: str) -> list[str]:
-    return [sys.executable, "-m", "neforward_ros.cli", *arguments]
+    return [sys.executable, "-m", "neforward_ros", *arguments]
 
 
 def default_sigint() -> None:

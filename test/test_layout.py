@@ -1,5 +1,7 @@
-"""The package's layout, as the README's module map describes it: no import cycles, one module
-importing rclpy, and the core importable without ROS or a middleware."""
+"""The package's layout, as the README's module map describes it: layers that import only downwards,
+no import cycles, the bag tool and the runtimes sharing the computation and never each other's
+internals, no module importing a command-line module, one module importing rclpy, and the core
+importable without ROS or a middleware."""
 
 from __future__ import annotations
 
@@ -9,6 +11,28 @@ import sys
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "neforward_ros"
+
+LAYERS = (
+    ("errors", "logs", "stamps", "rotations", "terminal", "disk_cache", "resources"),
+    ("model",),
+    ("kinematics", "wire"),
+    ("estimation",),
+    ("parameters",),
+    ("computation",),
+    ("interface",),
+    ("node",),
+    ("bag", "dds", "ros_node", "node_entry", "demo"),
+    ("cli", "command", "__main__"),
+)
+"""Bottom up: a module imports from its own layer or those below, never from above."""
+
+APPLICATIONS = {"bag": "bag", "dds": "dds", "ros_node": "rclpy", "node_entry": "rclpy"}
+"""The bag tool and the two runtimes: each imports what is below them, never another one's modules
+(the demo drives the no-ROS runtime as a user would, and may use its DDS helpers)."""
+
+COMMAND_LINE = ("neforward_ros.cli", "neforward_ros.command", "neforward_ros.__main__", "neforward_ros.bag.arguments",
+                "neforward_ros.bag.commands", "neforward_ros.dds.commands")  # fmt: skip
+"""Modules that read a command line: only the command line itself imports them."""
 
 
 def module_name(path: Path) -> str:
@@ -33,6 +57,19 @@ def imports() -> dict[str, set[str]]:
     return graph
 
 
+def top(module: str) -> str:
+    """The first name under the package: ``neforward_ros.bag.read`` -> ``bag``."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else ""
+
+
+def layer(module: str) -> int:
+    for number, names in enumerate(LAYERS):
+        if top(module) in names:
+            return number
+    raise AssertionError(f"{module} is in no layer of the module map: add it to LAYERS and the README")
+
+
 def test_no_import_cycles() -> None:
     graph = imports()
     state: dict[str, int] = {}
@@ -53,6 +90,40 @@ def test_no_import_cycles() -> None:
     assert not cycles, "import cycles:\n" + "\n".join(cycles)
 
 
+def test_every_module_imports_only_its_own_layer_and_those_below() -> None:
+    upward = [
+        f"{module} ({LAYERS[layer(module)][0]}...) imports {target} ({LAYERS[layer(target)][0]}...)"
+        for module, targets in imports().items()
+        if module != "neforward_ros"
+        for target in targets
+        if layer(target) > layer(module)
+    ]
+    assert not upward, "imports against the layers:\n" + "\n".join(upward)
+
+
+def test_the_bag_tool_and_the_runtimes_never_import_each_others_internals() -> None:
+    crossing = [
+        f"{module} imports {target}"
+        for module, targets in imports().items()
+        for target in targets
+        if top(module) in APPLICATIONS
+        and top(target) in APPLICATIONS
+        and APPLICATIONS[top(target)] != APPLICATIONS[top(module)]
+    ]
+    assert not crossing, "\n".join(crossing)
+
+
+def test_no_module_imports_a_command_line_module() -> None:
+    importing = [
+        f"{module} imports {target}"
+        for module, targets in imports().items()
+        for target in targets
+        if target in COMMAND_LINE and module not in ("neforward_ros.cli", "neforward_ros.command",
+                                                     "neforward_ros.__main__", "neforward_ros.bag.commands")
+    ]  # fmt: skip
+    assert not importing, "\n".join(importing)
+
+
 def test_only_the_rclpy_adapter_imports_rclpy() -> None:
     importing = [
         module_name(p)
@@ -68,7 +139,8 @@ def test_only_the_rclpy_adapter_imports_rclpy() -> None:
 
 def test_the_core_imports_without_ros_cyclonedds_or_rosbags() -> None:
     code = (
-        "import sys; import neforward_ros.node.pipeline, neforward_ros.node.handlers, neforward_ros.recursion; "
+        "import sys; import neforward_ros.node.pipeline, neforward_ros.node.handlers, "
+        "neforward_ros.computation.compute, neforward_ros.bag.compute; "
         "bad = [m for m in ('rclpy', 'cyclonedds', 'rosbags', 'matplotlib') if m in sys.modules]; print(bad)"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)

@@ -8,14 +8,10 @@ import re
 import pytest
 
 from neforward_ros import InputError
-from neforward_ros.node.settings import (
-    DEFAULTS,
-    PARAMETERS,
-    QosOverride,
-    load_params_file,
-    node_name_matches,
-    node_settings,
-)
+from neforward_ros.parameters.files import load_params_file, node_name_matches
+from neforward_ros.parameters.qos_overrides import QosOverride
+from neforward_ros.parameters.settings import node_settings
+from neforward_ros.parameters.table import DEFAULTS, PARAMETERS
 
 from conftest import CONFIG_DIR, TEST_DIR
 

@@ -13,7 +13,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from neforward_ros.node.pipeline import Pipeline, TrajectoryPoint
-from neforward_ros.node.settings import node_settings
+from neforward_ros.parameters.settings import node_settings
 from neforward_ros.wire import rostypes
 
 from conftest import CONFIG_DIR, TEST_ROBOTS, assert_close

@@ -15,7 +15,7 @@ import pytest
 from test_bag import NAMES, covered, record, trajectory
 
 from neforward_ros.dds.loopback import write_config
-from neforward_ros.node import topics
+from neforward_ros.interface import topics
 from neforward_ros.wire import cdr
 
 from conftest import CONFIG_DIR
@@ -45,7 +45,7 @@ def play_into_node(
         peer.wait_connected(node)
         started = time.monotonic()
         played = subprocess.run(
-            [sys.executable, "-m", "neforward_ros.cli", "play", *play_arguments],
+            [sys.executable, "-m", "neforward_ros", "play", *play_arguments],
             env=env,
             capture_output=True,
             text=True,
@@ -113,6 +113,6 @@ def test_play_errors_are_one_line(tmp_path) -> None:
         ([str(tmp_path), "--rate", "0"], "--rate must be a positive number"),
     ):
         done = subprocess.run(
-            [sys.executable, "-m", "neforward_ros.cli", "play", *arguments], capture_output=True, text=True
+            [sys.executable, "-m", "neforward_ros", "play", *arguments], capture_output=True, text=True
         )
         assert done.returncode == 1 and done.stderr.count("\n") == 1 and text in done.stderr, done.stderr

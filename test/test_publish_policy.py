@@ -10,7 +10,7 @@ import pytest
 
 from neforward_ros import forward_recursion, load_model
 from neforward_ros.node.pipeline import Pipeline
-from neforward_ros.node.settings import node_settings
+from neforward_ros.parameters.settings import node_settings
 
 from conftest import CONFIG_DIR, TEST_DIR, assert_close
 

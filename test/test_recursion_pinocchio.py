@@ -81,7 +81,7 @@ def test_orientations_are_the_rotations_as_unit_quaternions_with_w_not_negative(
 
 def test_batches_computed_in_several_chunks_match_pinocchio(monkeypatch) -> None:
     """Batches go through the recursion a chunk of samples at a time: stitching them must not matter."""
-    from neforward_ros import recursion
+    from neforward_ros.kinematics import forward as recursion
 
     monkeypatch.setattr(recursion, "_CHUNK", 7)
     path = TEST_ROBOTS["humanoid"]

@@ -10,7 +10,7 @@ import pytest
 
 from neforward_ros import inverse_dynamics, load_model
 from neforward_ros.node.pipeline import Pipeline, TrajectoryPoint
-from neforward_ros.node.settings import node_settings
+from neforward_ros.parameters.settings import node_settings
 
 from conftest import CONFIG_DIR
 from oracle import GRAVITY, pin

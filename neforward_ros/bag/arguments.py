@@ -13,12 +13,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from neforward_ros.bag.options import STORAGES
 from neforward_ros.errors import InputError
 
 if TYPE_CHECKING:
     pass
 
-STORAGES = ("mcap", "sqlite3")
 
 
 def add_bag_arguments(bag: argparse.ArgumentParser) -> None:
@@ -113,12 +113,12 @@ def add_bag_arguments(bag: argparse.ArgumentParser) -> None:
 
 def parameter_values(args: argparse.Namespace) -> dict[str, Any]:
     """The node parameter values the parsed command line gives: the params file's, the flags', then
-    the ``-p`` rules' (not yet validated: :func:`~neforward_ros.node.settings.node_settings` does).
+    the ``-p`` rules' (not yet validated: :func:`~neforward_ros.parameters.settings.node_settings` does).
 
     Raises:
         InputError: an unreadable params file, or a malformed flag or ``-p``.
     """
-    from neforward_ros.node.settings import command_line_parameters, load_params_file
+    from neforward_ros.parameters.files import command_line_parameters, load_params_file
 
     values: dict[str, Any] = {}
     if args.params:

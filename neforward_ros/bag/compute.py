@@ -1,103 +1,57 @@
-"""From a recording's joint samples to the node's results: segments, whole-recording estimates, and
-the batched recursion, a chunk of samples at a time (memory stays bounded for long recordings)."""
+"""From a recording's messages to the node's results: the inputs of every segment, then the shared
+computation (:func:`neforward_ros.computation.compute.compute`) a chunk of stamps at a time, so that
+memory stays bounded for long recordings.
+
+The inputs come from the whole-recording estimator for the node's default estimator (polyfit, fixed
+lag window / 2, the same numbers), and otherwise from replaying the recording's messages through
+the node's live inputs (:class:`~neforward_ros.computation.live_inputs.LiveInputs`: the streaming
+estimator, and the base tracker for a moving base), so that each stamp gets what the node would
+have published. A moving base's motion comes from the node's base tracker either way.
+"""
 
 from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
-from neforward_ros.bag.base import BaseAtStamps, base_at, root_states
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.read import Recording
 from neforward_ros.bag.report import Segment
-from neforward_ros.dynamics import split_values, wrenches_from_table
+from neforward_ros.computation.base_motion import BaseTracker
+from neforward_ros.computation.compute import ComputeState, compute
+from neforward_ros.computation.inputs import JointStates, LinkMotion
+from neforward_ros.computation.live_inputs import Inputs, LiveInputs
+from neforward_ros.computation.result import Result
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.coverage import covered_mask
-from neforward_ros.estimation.settings import StreamSettings
-from neforward_ros.estimation.stream import StreamingEstimator
-from neforward_ros.logs import ThrottledLog
 from neforward_ros.model import RobotModel
-from neforward_ros.node.contact import ContactDetector
-from neforward_ros.node.policy import apply_policy, hold_vector
-from neforward_ros.node.result import Dynamics, Result, make_result
-from neforward_ros.recursion import kinematics_table, root_state
 from neforward_ros.stamps import NS
 
 CHUNK = 8192
-"""Samples per batched recursion: bounds the memory of every later stage at a few MB per link."""
+"""Samples per batched computation: bounds the memory of every later stage at a few MB per link."""
 
 
 @dataclass
-class States:
-    """The estimated joint states of every output sample, concatenated over segments.
+class BagInputs:
+    """The inputs of every output stamp of every segment, concatenated, in order.
 
     Attributes:
-        stamps: (T,) the samples' stamps, integer ns; log_times: (T,) their recording times.
-        q, qd, qdd: (T, n) in the model's joint order; zeros where a joint has nothing.
-        known: (T, n) whether each joint's state is an estimate (or held, under ``hold``).
-        efforts: (T, n) the recorded efforts at each stamp (interpolated between a joint's samples),
-            NaN where there are none.
-        root: (T, 12) the root's state for a moving base (see :mod:`neforward_ros.bag.base`); None
-            for a fixed base.
-        world_rotation, world_position: (T, 3, 3) root -> world and (T, 3), for a moving base.
+        states: (T, n) joint states at the stamps (the estimates, the efforts).
+        log_times: (T,) the stamps' recording times.
+        base: the base source's link motion at the stamps, for a moving base; None for a fixed one.
+        segment: (T,) each stamp's segment (an index into the report's segments).
     """
 
-    stamps: np.ndarray
+    states: JointStates
     log_times: np.ndarray
-    q: np.ndarray
-    qd: np.ndarray
-    qdd: np.ndarray
-    known: np.ndarray
-    efforts: np.ndarray
-    root: np.ndarray | None = None
-    world_rotation: np.ndarray | None = None
-    world_position: np.ndarray | None = None
+    base: LinkMotion | None
+    segment: np.ndarray
 
     def __len__(self) -> int:
-        return len(self.stamps)
-
-
-def results(
-    model: RobotModel, states: States, options: BagOptions, chunk: int | None = None
-) -> Iterator[tuple[Result, np.ndarray]]:
-    """(result, recording times) of consecutive chunks of the samples, each from one batched recursion
-    (and, when the options ask for torques, wrenches or contact, one batched backward pass)."""
-    settings = options.settings
-    root = root_state(settings.gravity)
-    chunk = CHUNK if chunk is None else chunk
-    scale = np.array([settings.effort_scale.get(n, 1.0) for n in model.joint_names])
-    offset = np.array([settings.effort_offset.get(n, 0.0) for n in model.joint_names])
-    detector = None
-    if settings.contact_thresholds:
-        thresholds = np.array([settings.contact_thresholds.get(n, np.nan) for n in model.joint_names])
-        detector = ContactDetector(thresholds, settings.contact_debounce, model.joint_names, ThrottledLog())
-    for start in range(0, len(states), chunk):
-        part = slice(start, start + chunk)
-        q = states.q[part]
-        chunk_root = root if states.root is None else list(states.root[part].T)
-        table = kinematics_table(model, q, states.qd[part], states.qdd[part], chunk_root)
-        known = states.known[part]
-        result = make_result(model, states.stamps[part], table, model.determined_links(known))
-        if states.world_rotation is not None and settings.world_frame:
-            result = replace(result, world=(states.world_rotation[part], states.world_position[part]))
-        if options.dynamics_needed:
-            force, moment, torques = split_values(model, wrenches_from_table(model, q, table))
-            complete = known.all(axis=1)
-            torques = np.where(complete[:, None], torques, np.nan)  # no dynamics where a joint has no state
-            measured = scale * states.efforts[part] + offset
-            dynamics = Dynamics(model.joint_names, q, states.qd[part], torques, measured, force, moment)
-            contact = None
-            if detector is not None:
-                external = dynamics.external
-                contact = np.full(len(q), np.nan)
-                for i in np.flatnonzero(complete):
-                    state = detector.update(int(states.stamps[part][i]), external[i])
-                    contact[i] = np.nan if state is None else float(state)
-            result = replace(result, dynamics=dynamics, contact=contact)
-        yield result, states.log_times[part]
+        return len(self.log_times)
 
 
 def _segments(recording: Recording) -> list[tuple[int, int]]:
@@ -107,82 +61,88 @@ def _segments(recording: Recording) -> list[tuple[int, int]]:
     return [(a, b) for a, b in itertools.pairwise(edges) if b > a]
 
 
-def estimate_states(recording: Recording, options: BagOptions, progress: Callable[[str, float], None]) -> States:
-    """Each segment's joint states at every message stamp, from the whole-recording estimator.
-
-    As in the node, a joint has an estimate at a stamp only where its samples cover the estimator's
-    support there (:mod:`neforward_ros.estimation.coverage`, the fixed-lag fit's) and none is more
-    than max_gap away; the publish policy (:mod:`neforward_ros.node.policy`) then says what is
-    written for stamps where some joints have none.
-    """
-    settings = options.settings
-    model = recording.model
-    hold = hold_vector(model.joint_names, settings.hold_positions)
-    n = len(model.joint_names)
-    pieces: list[tuple[np.ndarray, ...]] = []
+def prepare_inputs(recording: Recording, options: BagOptions, progress: Callable[[str, float], None]) -> BagInputs:
+    """Each segment's inputs at every message stamp (see the module docstring); the report's
+    segments are listed as it goes."""
+    parts: list[tuple[JointStates, np.ndarray, LinkMotion | None]] = []
     ranges = _segments(recording)
     for number, (start, stop) in enumerate(ranges):
         progress("estimating", number / len(ranges))
         segment_stamps = recording.stamps[start:stop]
         segment = Segment(int(segment_stamps.min()), int(segment_stamps.max()), stop - start)
         recording.report.segments.append(segment)
-        targets, first = np.unique(segment_stamps, return_index=True)
         if options.streamed:
-            state, efforts, silent, absent = _replayed(recording, start, stop, targets, settings.estimator)
+            states, log_times, base, absent = _replayed(recording, start, stop, options)
         else:
-            state, efforts, silent, absent = _whole(recording, start, stop, targets, options)
+            states, log_times, absent = _whole(recording, start, stop, options)
+            base = None
+            if recording.base is not None:
+                states, log_times, base = _with_base(recording, start, stop, states, log_times, options)
         if absent:
             segment.note = f"too few samples of {', '.join(absent)} for an estimate"
-        known = np.all(np.isfinite(state), axis=0)
-        published = apply_policy(settings.publish_policy, *state, known, silent, hold)
-        ok = published.publish
-        base = None
-        if recording.base is not None:  # a moving base: its motion at these stamps, from the base topic
-            at = base_at(recording.base, targets, options)
-            link = settings.base_link or recording.base.frame_id
-            ok &= at.ok & model.determined_links(published.known)[:, model.link_index[link]]
-            rows = np.flatnonzero(ok)
-            picked = BaseAtStamps(
-                at.ok[rows],
-                *(None if x is None else x[rows] for x in (at.omega, at.alpha, at.specific_force, at.velocity)),
-                at.orientation[rows],
-                at.position[rows],
-            )
-            base = root_states(model, link, published.q[rows], published.qd[rows], published.qdd[rows], picked)
-        segment.skipped = int(np.count_nonzero(~ok))
-        segment.samples_out = int(np.count_nonzero(ok))
-        segment.partial = int(np.count_nonzero(ok & ~published.known.all(axis=1)))
-        log_times = recording.log_times[start:stop][first]
-        pieces.append(
-            (
-                targets[ok],
-                log_times[ok],
-                published.q[ok],
-                published.qd[ok],
-                published.qdd[ok],
-                published.known[ok],
-                efforts[ok],
-                *(base if base is not None else (None, None, None)),
-            )
-        )
+        segment.skipped = len(np.unique(segment_stamps)) - len(log_times)  # stamps with no input: no estimate, no base
+        parts.append((states, log_times, base))
     progress("estimating", 1.0)
-    if not pieces:
-        stamps = np.zeros(0, dtype=np.int64)
-        zeros = np.zeros((0, n))
-        pieces = [(stamps, stamps, zeros, zeros, zeros, zeros.astype(bool), zeros, None, None, None)]
-    return States(*(None if parts[0] is None else np.concatenate(parts) for parts in zip(*pieces, strict=True)))
+    n = len(recording.model.joint_names)
+    parts = [p for p in parts if len(p[1])]
+    if not parts:
+        return BagInputs(JointStates.empty(n), np.zeros(0, dtype=np.int64), None, np.zeros(0, dtype=np.int64))
+    numbers = [k for k, p in enumerate(parts) for _ in range(len(p[1]))]
+    bases = [p[2] for p in parts]
+    return BagInputs(
+        JointStates.stack([p[0] for p in parts]),
+        np.concatenate([p[1] for p in parts]),
+        None if bases[0] is None else LinkMotion.stack(bases),
+        np.array(numbers, dtype=np.int64),
+    )
+
+
+def results(
+    model: RobotModel, inputs: BagInputs, options: BagOptions, segments: list[Segment], chunk: int | None = None
+) -> Iterator[tuple[Result | None, np.ndarray, int]]:
+    """(result, its recording times, the inputs done so far) of consecutive chunks of the inputs, each
+    from one call of the shared computation (None: nothing published in the chunk); the segments'
+    counts of stamps with output, without, and with only some links are added up as it goes."""
+    chunk = CHUNK if chunk is None else chunk
+    settings = options.settings
+    state = ComputeState.new(model, settings, lambda level, message: None)  # the report says what matters
+    for start in range(0, len(inputs), chunk):
+        part = slice(start, start + chunk)
+        base = None if inputs.base is None else inputs.base.part(part)
+        computed = compute(model, settings, inputs.states.part(part), base, state)
+        numbers = inputs.segment[part]
+        published = np.zeros(len(numbers), dtype=bool)
+        if computed.rows is not None:
+            published[computed.rows] = True
+        partial = published & ~computed.known.all(axis=1)
+        for k, segment in enumerate(segments):
+            mine = numbers == k
+            if mine.any():
+                segment.samples_out += int(np.count_nonzero(published & mine))
+                segment.skipped += int(np.count_nonzero(~published & mine))
+                segment.partial += int(np.count_nonzero(partial & mine))
+        done = min(start + chunk, len(inputs))
+        if computed.result is not None and len(computed.rows):
+            yield computed.result, inputs.log_times[part][computed.rows], done
+        else:
+            yield None, inputs.log_times[:0], done
 
 
 def _whole(
-    recording: Recording, start: int, stop: int, targets: np.ndarray, options: BagOptions
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
-    """One segment's (q, qd, qdd) (3, T, n), efforts (T, n), silent (T, n) and the joints with too few
-    samples, from the whole-recording estimator at the stamps ``targets``."""
+    recording: Recording, start: int, stop: int, options: BagOptions
+) -> tuple[JointStates, np.ndarray, list[str]]:
+    """One segment's joint states at every message stamp from the whole-recording estimator, their
+    recording times, and the joints with too few samples.
+
+    As in the node, a joint has an estimate at a stamp only where its samples cover the estimator's
+    support there (:mod:`neforward_ros.estimation.coverage`, the fixed-lag fit's) and none is more
+    than max_gap away."""
     model, settings = recording.model, options.settings
     n = len(model.joint_names)
     wrap = model.continuous_columns
     batch = options.batch_estimator
     support = batch.support
+    targets, first = np.unique(recording.stamps[start:stop], return_index=True)
     origin = int(targets[0])
     target_s = (targets - origin) / NS
     state = np.full((3, len(targets), n), np.nan)
@@ -227,14 +187,37 @@ def _whole(
         for column, values in enumerate((q_at, qd_at, qdd_at)):
             values[unready] = np.nan
             state[column][:, joints] = values
-    return state, efforts, silent, sorted(set(absent))
+    ready = np.isfinite(state).all(axis=0)
+    states = JointStates(targets, *np.where(ready, state, 0.0), ready, silent, efforts)
+    return states, recording.log_times[start:stop][first], sorted(set(absent))
+
+
+def _with_base(
+    recording: Recording, start: int, stop: int, states: JointStates, log_times: np.ndarray, options: BagOptions
+) -> tuple[JointStates, np.ndarray, LinkMotion]:
+    """The stamps where the base's motion is known, with it: the recording's base messages through the
+    node's base tracker (every estimate kept), its motion at the joint stamps as the node takes it."""
+    settings = options.settings
+    assert recording.base is not None
+    tracker = BaseTracker(settings.base_source, settings.estimator, settings.gravity, keep=None)
+    first, last = recording.log_times[start], recording.log_times[stop - 1]
+    inside = (recording.base.log_times >= first) if start else np.ones(len(recording.base.messages), dtype=bool)
+    if stop < len(recording.log_times):
+        inside &= recording.base.log_times <= last
+    for k in np.flatnonzero(inside):
+        tracker.on_message(recording.base.messages[k])
+    link = settings.base_link or tracker.frame_id
+    motion, reasons = tracker.motion_at(states.stamps, link)
+    ok = np.array([r is None for r in reasons], dtype=bool)
+    rows = np.flatnonzero(ok)
+    return states.part(rows), log_times[rows], motion.part(rows)
 
 
 def _replayed(
-    recording: Recording, start: int, stop: int, targets: np.ndarray, estimator: StreamSettings
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
-    """As :func:`_whole`, by replaying the segment's messages through the node's streaming estimator
-    (causal mode, another lag, kalman): each stamp gets exactly what the node would have published."""
+    recording: Recording, start: int, stop: int, options: BagOptions
+) -> tuple[JointStates, np.ndarray, LinkMotion | None, list[str]]:
+    """As :func:`_whole`, by replaying the segment's messages (and its base messages, in recording
+    order) through the node's live inputs: each stamp gets exactly what the node would have had."""
     model = recording.model
     n = len(model.joint_names)
     count = stop - start
@@ -245,46 +228,50 @@ def _replayed(
         at = rows[inside] - start
         present[at, j] = True
         q[at, j], v[at, j], e[at, j] = qs[inside], vs[inside], es[inside]
-    stream = StreamingEstimator(
-        model.joint_names,
-        wrap=model.continuous_columns,
-        ignored_names=model.mimic_joint_names,
-        settings=estimator,
-        log=lambda level, message: None,  # the report says what the node would have logged
-    )
+    live = LiveInputs(model, options.settings, lambda level, message: None, keep_base=None)
     names = np.array(model.joint_names, dtype=object)
-    state = np.full((3, len(targets), n), np.nan)
-    efforts = np.full((len(targets), n), np.nan)
-    silent = np.ones((len(targets), n), dtype=bool)
-    seen = np.zeros(n, dtype=bool)
     stamps = recording.stamps[start:stop].tolist()
-    estimates = []
+    log_times = recording.log_times[start:stop]
+    base_times: list[int] = []
+    base_messages = []
+    if recording.base is not None:
+        first, last = log_times[0], log_times[-1]
+        inside = (recording.base.log_times >= first) if start else np.ones(len(recording.base.messages), bool)
+        if stop < len(recording.log_times):
+            inside &= recording.base.log_times <= last
+        base_times = recording.base.log_times[inside].tolist()
+        base_messages = [recording.base.messages[k] for k in np.flatnonzero(inside)]
+    out: list[Inputs] = []
+    b = 0
     for m, stamp in enumerate(stamps):
+        while b < len(base_messages) and base_times[b] <= log_times[m]:  # in recording order
+            out += live.base(base_messages[b])
+            b += 1
         joints = np.flatnonzero(present[m])
-        seen[joints] = True
-        velocities = v[m, joints]
-        measured = e[m, joints]
-        estimates += stream.update(
+        velocities, measured = v[m, joints], e[m, joints]
+        out += live.joint_state(
             stamp,
             names[joints].tolist(),
             q[m, joints].tolist(),
             velocities.tolist() if np.isfinite(velocities).all() else (),
             measured.tolist() if np.isfinite(measured).all() else (),
         )
-    estimates += stream.flush()
-    index = {stamp: k for k, stamp in enumerate(targets.tolist())}
-    for estimate in estimates:
-        k = index.get(estimate.stamp_ns)
-        if k is None:
-            continue
-        ready = estimate.ready
-        for column, values in enumerate((estimate.positions, estimate.velocities, estimate.accelerations)):
-            state[column, k] = np.where(ready, values, np.nan)
-        if estimate.efforts is not None:
-            efforts[k] = estimate.efforts
-        silent[k] = ~(estimate.ages <= estimator.max_gap)
+    while b < len(base_messages):
+        out += live.base(base_messages[b])
+        b += 1
+    out += live.flush()
+    index: dict[int, int] = {}  # a stamp's recording time: its first message's
+    for k, stamp in enumerate(stamps):
+        index.setdefault(stamp, k)
+    seen = present.any(axis=0)
     absent = [model.joint_names[j] for j in range(n) if not seen[j]]
-    return state, efforts, silent, absent
+    if not out:
+        return JointStates.empty(n), np.zeros(0, dtype=np.int64), None, absent
+    states = JointStates.stack([states for states, _ in out])
+    times = np.array([log_times[index[s]] for s in states.stamps.tolist()], dtype=np.int64)
+    motions = [motion for _, motion in out]
+    base = None if motions[0] is None else LinkMotion.stack(motions)
+    return states, times, base, absent
 
 
 def _efforts_at(t_ns: np.ndarray, efforts: np.ndarray, targets: np.ndarray) -> np.ndarray:

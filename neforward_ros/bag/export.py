@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from neforward_ros.computation.result import Result
 from neforward_ros.model import JointKind, RobotModel
-from neforward_ros.node.result import Result
 from neforward_ros.stamps import NS
 
 CSV_FIELDS = (

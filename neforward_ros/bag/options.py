@@ -1,7 +1,7 @@
 """What ``neforward bag`` computes and writes: the node's settings, and what only a recording needs.
 
 Every option of the node applies offline too, from the same parameter table
-(:data:`neforward_ros.node.settings.PARAMETERS`) and the same params files: ``settings`` is exactly
+(:data:`neforward_ros.parameters.settings.PARAMETERS`) and the same params files: ``settings`` is exactly
 what the node would run with. The estimator's default (polyfit, fixed lag window / 2) is computed
 over the whole recording at once, which gives what the node publishes; any other estimator setting
 (causal mode, another lag, kalman) replays the recording through the node's streaming estimator,
@@ -14,10 +14,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from neforward_ros.bag.arguments import STORAGES
 from neforward_ros.errors import InputError
 from neforward_ros.estimation.settings import StreamSettings
-from neforward_ros.node.settings import NodeSettings, node_settings
+from neforward_ros.parameters.settings import NodeSettings, node_settings
+
+STORAGES = ("mcap", "sqlite3")
+"""The storages a recording is written in."""
 
 
 @dataclass(frozen=True)
@@ -46,7 +48,7 @@ class BagOptions:
         """Options from node parameter values (validated as the node validates them) and bag fields.
 
         Raises:
-            InputError: as :func:`~neforward_ros.node.settings.node_settings`.
+            InputError: as :func:`~neforward_ros.parameters.settings.node_settings`.
         """
         return cls(settings=node_settings(values), **fields)
 

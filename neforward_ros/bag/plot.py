@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from neforward_ros.computation.result import Result
 from neforward_ros.model import RobotModel
-from neforward_ros.node.result import Result
 from neforward_ros.stamps import NS
 
 LEGEND_LINKS = 12

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from neforward_ros.bag.compute import estimate_states, results
+from neforward_ros.bag.compute import prepare_inputs, results
 from neforward_ros.bag.export import CsvWriter
 from neforward_ros.bag.options import BagOptions, check_options
 from neforward_ros.bag.plot import PlotSeries, write_plot
@@ -85,15 +85,8 @@ def process_bag(
             f"robot {model.name!r} has a floating base (joint {model.floating_base!r}) but no base source was "
             "given: its root link was taken to be at rest (--base imu or --base odometry for a moving base)"
         )
-    states = estimate_states(recording, options, progress)
+    inputs = prepare_inputs(recording, options, progress)
     report = recording.report
-    report.samples_out = len(states)
-    if report.samples_out == 0:
-        raise InputError(
-            "no output: no stamp of the recording has an estimate for every joint (publish policy wait) or for "
-            f"any joint; an estimate needs samples covering {settings.estimator.window:g} s around its stamp "
-            "(estimator.window)"
-        )
     # Every output is written under a temporary name and all are moved into place together at the
     # end: an error or an interrupt leaves none of them, and nothing half-written.
     partials: list[Path] = []
@@ -102,12 +95,14 @@ def process_bag(
         csv = None
         if csv_path is not None:
             partials.append(_partial(Path(csv_path)))
-            measured = bool(np.isfinite(states.efforts).any())
+            measured = bool(np.isfinite(inputs.states.efforts).any())
             csv = CsvWriter(partials[-1], model, settings.publish_torques, settings.publish_torques and measured)
         series = PlotSeries(settings.gravity, settings.publish_torques) if plot_path is not None else None
-        written = 0
         contact_state, origin = False, report.segments[0].first_ns
-        for result, log_times in results(model, states, options):
+        for result, log_times, done in results(model, inputs, options, report.segments):
+            progress("computing", done / len(inputs))
+            if result is None:
+                continue
             if result.contact is not None:  # the contact intervals, for the report
                 for stamp, state in zip(result.stamp_ns.tolist(), result.contact.tolist(), strict=True):
                     if state == state and bool(state) != contact_state:  # a known state that changed
@@ -122,8 +117,13 @@ def process_bag(
                 csv.write(result)
             if series is not None:
                 series.add(result)
-            written += len(log_times)
-            progress("computing", written / len(states))
+        report.samples_out = sum(segment.samples_out for segment in report.segments)
+        if report.samples_out == 0:
+            raise InputError(
+                "no output: no stamp of the recording has an estimate for every joint (publish policy wait) or "
+                f"for any joint; an estimate needs samples covering {settings.estimator.window:g} s around its "
+                "stamp (estimator.window)"
+            )
         if csv is not None:
             csv.close()
         if series is not None and plot_path is not None:

@@ -9,17 +9,39 @@ from typing import Any
 
 import numpy as np
 
-from neforward_ros.bag.base import BaseSamples, read_base
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.report import BagReport
+from neforward_ros.computation.base_motion import BaseMessage, base_message
 from neforward_ros.errors import InputError, ModelError
 from neforward_ros.estimation.joint_messages import describe_names, name_map
 from neforward_ros.estimation.timeline import sort_out
+from neforward_ros.interface import topics
 from neforward_ros.logs import ThrottledLog
 from neforward_ros.model import RobotModel, load_model
-from neforward_ros.node import topics
 from neforward_ros.stamps import NS
 from neforward_ros.wire import cdr
+from neforward_ros.wire.rostypes import deserialize
+
+
+@dataclass
+class BaseRecording:
+    """A recording's base topic (sensor_msgs/Imu or nav_msgs/Odometry), decoded, in recording order.
+
+    Attributes:
+        topic: its name.
+        messages: each message as the node's base tracker takes it (its recording time as the
+            receive time).
+        log_times: (N,) their recording times.
+    """
+
+    topic: str
+    messages: list[BaseMessage]
+    log_times: np.ndarray
+
+    @property
+    def frame_id(self) -> str:
+        """The frame the messages measure (the first one that names one)."""
+        return next((m.frame_id for m in self.messages if m.frame_id), "")
 
 
 @dataclass
@@ -29,7 +51,7 @@ class Recording:
     stamps: np.ndarray  # (M,) int64 ns, per message
     log_times: np.ndarray  # (M,) int64 ns
     columns: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]  # joint -> (message index, q, v, effort)
-    base: BaseSamples | None = None  # the base topic's samples (a moving base)
+    base: BaseRecording | None = None  # the base topic (a moving base)
 
 
 def read(source: Path, options: BagOptions, progress: Callable[[str, float], None]) -> Recording:
@@ -190,3 +212,36 @@ def _model(
         return load_model(text, root_link=root_link, log=log)
     except ModelError as exc:
         raise ModelError(f"the recording's robot_description: {exc}") from exc
+
+
+def read_base(reader: Any, options: BagOptions) -> BaseRecording | None:
+    """The base topic's messages (None for a fixed base).
+
+    Raises:
+        InputError: no such topic in the recording (the message lists what there is), or no usable message.
+    """
+    settings = options.settings
+    source = settings.base_source
+    if source == "fixed":
+        return None
+    kind = topics.IMU_TYPE if source == "imu" else topics.ODOMETRY_TYPE
+    available = {c.topic: c.msgtype for c in reader.connections}
+    topic = options.base_topic
+    if topic is None:
+        candidates = sorted(name for name, msgtype in available.items() if msgtype == kind)
+        named = "/" + settings.base_topic.lstrip("/")  # the node's base.topic, in the root namespace
+        if len(candidates) > 1 and named in candidates:
+            candidates = [named]
+        if len(candidates) != 1:
+            listing = ", ".join(f"{n} ({t})" for n, t in sorted(available.items())) or "none"
+            raise InputError(f"--base {source} needs one {kind} topic (--base-topic to choose); topics: {listing}")
+        topic = candidates[0]
+    if available.get(topic) != kind:
+        raise InputError(f"the recording has no {kind} topic {topic}")
+    messages, times = [], []
+    for _, log_time, raw in reader.messages(connections=[c for c in reader.connections if c.topic == topic]):
+        messages.append(base_message(source, deserialize(kind, raw), log_time))
+        times.append(log_time)
+    if len(messages) < 3:
+        raise InputError(f"the base topic {topic} has fewer than 3 messages")
+    return BaseRecording(topic, messages, np.asarray(times, dtype=np.int64))

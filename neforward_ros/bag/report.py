@@ -59,6 +59,7 @@ class Progress:
             return
         self._last = now
         filled = int(30 * min(max(fraction, 0.0), 1.0))
+        terminal.line_left_open(True)  # first: an interrupt while writing must still end the line
         sys.stderr.write(f"\r{what:<12} [{'#' * filled}{'.' * (30 - filled)}] {100 * fraction:5.1f}%")
         terminal.line_left_open(fraction < 1.0)
         if fraction >= 1.0:

@@ -11,12 +11,12 @@ from typing import Any
 import numpy as np
 
 from neforward_ros.bag.options import BagOptions
+from neforward_ros.computation.result import Result
+from neforward_ros.interface import encoder
+from neforward_ros.interface.messages import dynamics_messages, per_link_messages, world_link_states
+from neforward_ros.interface.names import NodeNames
+from neforward_ros.interface.topics import COM_STATES, LINK_STATES, WORLD_LINK_STATES, output_list
 from neforward_ros.model import RobotModel
-from neforward_ros.node import messages
-from neforward_ros.node.messages import dynamics_messages, per_link_messages, world_link_states
-from neforward_ros.node.names import NodeNames
-from neforward_ros.node.result import Result
-from neforward_ros.node.topics import COM_STATES, LINK_STATES, WORLD_LINK_STATES, output_list
 from neforward_ros.wire import cdr
 from neforward_ros.wire.rostypes import facts
 
@@ -68,7 +68,7 @@ class RecordingWriter:
             for topic, kind in output_topics(options)
         }
         self.topics = [topic for topic, _ in output_topics(options)]
-        self._templates = messages.Templates(settings.frame_prefix)
+        self._templates = encoder.Templates(settings.frame_prefix)
         self._multi_dof = [self.connections[self.names.resolve(topic)] for topic in (LINK_STATES, COM_STATES)]
 
     def write(self, result: Result, log_times: np.ndarray) -> None:

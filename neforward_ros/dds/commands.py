@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import gc
 import logging
-import os
 import signal
 import sys
 import threading
@@ -14,27 +13,20 @@ from typing import Any
 
 import yaml
 
+from neforward_ros.dds.domain import domain_id
 from neforward_ros.dds.qos import default_qos, latched_qos
 from neforward_ros.dds.types import RawBytes, raw_reader
 from neforward_ros.errors import InputError
+from neforward_ros.interface import topics
+from neforward_ros.interface.names import NodeNames
 from neforward_ros.model import description_text
-from neforward_ros.node import topics
-from neforward_ros.node.names import NodeNames
-from neforward_ros.node.settings import NODE_NAME, command_line_parameters, node_settings
+from neforward_ros.parameters.files import command_line_parameters
+from neforward_ros.parameters.settings import node_settings
+from neforward_ros.parameters.table import NODE_NAME
 from neforward_ros.wire.rostypes import deserialize
 
 _LEVELS = {"DEBUG": logging.DEBUG, "INFO": logging.INFO, "WARN": logging.WARNING, "WARNING": logging.WARNING}
 _LEVELS.update({"ERROR": logging.ERROR, "FATAL": logging.CRITICAL})
-
-
-def domain_id() -> int:
-    """ROS_DOMAIN_ID, 0 when unset, as ROS 2 does."""
-    text = os.environ.get("ROS_DOMAIN_ID", "").strip()
-    if not text:
-        return 0
-    if not text.isdigit() or int(text) > 232:
-        raise InputError(f"ROS_DOMAIN_ID must be an integer from 0 to 232, got {text!r}")
-    return int(text)
 
 
 def run_node(urdf: str | None, params_file: str | None, ros_args: Sequence[str]) -> int:

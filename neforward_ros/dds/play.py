@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from neforward_ros.errors import InputError
-from neforward_ros.node import topics as node_topics
+from neforward_ros.interface import topics as node_topics
 from neforward_ros.stamps import NS, time_message
 from neforward_ros.wire import cdr
 
@@ -74,7 +74,7 @@ def play(
     from cyclonedds.pub import DataWriter
     from cyclonedds.topic import Topic
 
-    from neforward_ros.dds.commands import domain_id
+    from neforward_ros.dds.domain import domain_id
     from neforward_ros.dds.qos import default_qos, latched_qos
     from neforward_ros.dds.types import dds_type, raw_sample
 

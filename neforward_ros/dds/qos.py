@@ -5,7 +5,7 @@ from __future__ import annotations
 from cyclonedds.qos import Policy, Qos
 
 from neforward_ros.dds.types import type_hash
-from neforward_ros.node.settings import QosOverride
+from neforward_ros.parameters.qos_overrides import QosOverride
 
 _MAX_BLOCKING_NS = 100_000_000  # rmw_qos_profile_default leaves it to the RMW; Cyclone's default
 

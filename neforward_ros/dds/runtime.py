@@ -23,13 +23,13 @@ from cyclonedds.util import duration
 from neforward_ros.dds.graph import GraphAnnouncer
 from neforward_ros.dds.qos import default_qos, latched_qos, participant_qos
 from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
+from neforward_ros.interface import topics
+from neforward_ros.interface.names import NodeNames
+from neforward_ros.interface.topics import JOINT_STATES, JOINT_STATES_ACCEL, ROBOT_DESCRIPTION
 from neforward_ros.logs import BoundedLog, LogFunction, ThrottledLog, python_log
-from neforward_ros.node import topics
 from neforward_ros.node.handlers import MessageHandlers, decode_clock_ns
-from neforward_ros.node.names import NodeNames
 from neforward_ros.node.pipeline import Pipeline
-from neforward_ros.node.settings import NodeSettings
-from neforward_ros.node.topics import JOINT_STATES, JOINT_STATES_ACCEL, ROBOT_DESCRIPTION
+from neforward_ros.parameters.settings import NodeSettings
 
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
 _ANY = SampleState.Any | ViewState.Any | InstanceState.Any

@@ -26,9 +26,9 @@ import numpy as np
 from neforward_ros.demo.robot import demo_trajectory
 from neforward_ros.errors import NeforwardError
 from neforward_ros.estimation.settings import StreamSettings
+from neforward_ros.interface import topics
+from neforward_ros.kinematics.forward import forward_recursion
 from neforward_ros.model import RobotModel, load_model
-from neforward_ros.node import topics
-from neforward_ros.recursion import forward_recursion
 from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr
 
@@ -159,7 +159,7 @@ def run_demo(
     model = load_model(path, root_link=root_link)
     domain = use_loopback()
     node_log = tempfile.NamedTemporaryFile(prefix="neforward-demo-node-", suffix=".log", delete=False)
-    command = [sys.executable, "-m", "neforward_ros.cli", "run", "--urdf", str(path)]
+    command = [sys.executable, "-m", "neforward_ros", "run", "--urdf", str(path)]
     command += ["--ros-args", "-p", f"estimator.method:={settings.method}", "-p", f"estimator.mode:={settings.mode}"]
     if settings.lag is not None:
         command += ["-p", f"estimator.lag:={float(settings.lag)!r}"]

@@ -11,8 +11,8 @@ import textwrap
 import numpy as np
 
 from neforward_ros.demo.robot import demo_trajectory
+from neforward_ros.kinematics.forward import DEFAULT_GRAVITY, forward_recursion
 from neforward_ros.model import load_model
-from neforward_ros.recursion import DEFAULT_GRAVITY, forward_recursion
 from neforward_ros.resources import DEFAULT_ROBOT, bundled_config_path
 
 

@@ -13,11 +13,11 @@ import logging
 import struct
 from collections.abc import Callable
 
+from neforward_ros.computation.base_motion import base_message
+from neforward_ros.computation.result import Result
+from neforward_ros.interface import topics
 from neforward_ros.logs import LogFunction, ThrottledLog
-from neforward_ros.node import topics
-from neforward_ros.node.base_source import BaseMessage
 from neforward_ros.node.pipeline import Pipeline, TrajectoryPoint
-from neforward_ros.node.result import Result
 from neforward_ros.stamps import stamp_ns
 from neforward_ros.wire import cdr
 from neforward_ros.wire.rostypes import deserialize
@@ -83,31 +83,8 @@ class MessageHandlers:
         self.messages_in += 1
         source = self.pipeline.settings.base_source
         try:
-            if source == "imu":
-                m = deserialize(topics.IMU_TYPE, data)
-                q = m["orientation"]
-                message = BaseMessage(
-                    stamp_ns(m["header"]["stamp"]),
-                    m["header"]["frame_id"],
-                    _xyz(m["angular_velocity"]),
-                    _xyz(m["linear_acceleration"]),
-                    # REP-145: an orientation covariance starting with -1 means "no orientation"
-                    [q["x"], q["y"], q["z"], q["w"]] if m["orientation_covariance"][0] != -1.0 else None,
-                    receive_ns=receive_ns,
-                )
-            else:
-                m = deserialize(topics.ODOMETRY_TYPE, data)
-                pose, twist = m["pose"]["pose"], m["twist"]["twist"]
-                q = pose["orientation"]
-                message = BaseMessage(
-                    stamp_ns(m["header"]["stamp"]),
-                    m["child_frame_id"],
-                    _xyz(twist["angular"]),
-                    _xyz(twist["linear"]),
-                    [q["x"], q["y"], q["z"], q["w"]],
-                    _xyz(pose["position"]),
-                    receive_ns,
-                )
+            kind = topics.IMU_TYPE if source == "imu" else topics.ODOMETRY_TYPE
+            message = base_message(source, deserialize(kind, data), receive_ns)
             results = self.pipeline.on_base(message)
         except Exception as exc:
             self._dropped(f"base {source} message", exc)
@@ -140,10 +117,6 @@ class MessageHandlers:
     def _dropped(self, what: str, exc: Exception, why: str = "") -> None:
         detail = f"{why}: " if why else ""
         self._log.every(("dropped", what), logging.ERROR, f"{what} dropped: {detail}{type(exc).__name__}: {exc}")
-
-
-def _xyz(vector: dict) -> list[float]:
-    return [vector["x"], vector["y"], vector["z"]]
 
 
 def decode_clock_ns(data: bytes) -> int:

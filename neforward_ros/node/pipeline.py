@@ -1,9 +1,12 @@
-"""The node's core, with no transport: joint states in, messages to publish out.
+"""The node's core, with no transport: messages in, results to publish out.
 
 :class:`Pipeline` holds the model (from the ``robot_description`` parameter or topic, replaceable at
-run time) and the streaming estimator. The rclpy node, the no-ROS DDS node and the tests feed it
-the fields of incoming messages and publish what it returns, so every runtime behaves the same.
-Nothing here raises on bad input: it is dropped and logged (throttled).
+run time), the live inputs (the streaming estimator and, for a moving base, the base tracker:
+:mod:`neforward_ros.computation.live_inputs`) and the computation's state, and turns each result of
+:func:`neforward_ros.computation.compute.compute` into message bytes. The rclpy node, the no-ROS DDS
+node and the tests feed it the fields of incoming messages and publish what it returns, so every
+runtime behaves the same; the bag tool calls the same computation on a recording. Nothing here
+raises on bad input: it is dropped and logged (throttled).
 """
 
 from __future__ import annotations
@@ -15,25 +18,20 @@ from typing import Any
 
 import numpy as np
 
-from neforward_ros.base import base_from_link, link_pose
-from neforward_ros.dynamics import split_values, wrenches_from_table
+from neforward_ros.computation.base_motion import BaseMessage
+from neforward_ros.computation.compute import Computed, ComputeState, compute
+from neforward_ros.computation.inputs import JointStates, LinkMotion
+from neforward_ros.computation.live_inputs import Inputs, LiveInputs
+from neforward_ros.computation.result import Result
 from neforward_ros.errors import ModelError
-from neforward_ros.estimation.estimate import JointEstimate
 from neforward_ros.estimation.joint_messages import JointMessageReader
-from neforward_ros.estimation.stream import StreamingEstimator
-from neforward_ros.kernel import kernel_of
+from neforward_ros.interface import encoder, messages
+from neforward_ros.interface.names import is_token
+from neforward_ros.interface.topics import ROBOT_DESCRIPTION, Output, output_list
+from neforward_ros.kinematics.forward_kernel import kernel_of
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel, load_model
-from neforward_ros.node import messages
-from neforward_ros.node.base_source import Aligner, BaseMessage, BaseTracker, LinkSample
-from neforward_ros.node.contact import ContactDetector
-from neforward_ros.node.names import is_token
-from neforward_ros.node.policy import apply_policy, hold_vector
-from neforward_ros.node.result import Dynamics, Result, make_result
-from neforward_ros.node.settings import NodeSettings
-from neforward_ros.node.topics import ROBOT_DESCRIPTION, Output, output_list
-from neforward_ros.recursion import kinematics_table, root_state
-from neforward_ros.rotations import rotation_matrix
+from neforward_ros.parameters.settings import NodeSettings
 
 
 @dataclass(frozen=True)
@@ -65,20 +63,16 @@ class Pipeline:
         self._log_function = log
         self._log = ThrottledLog(log)
         self.model: RobotModel | None = None
-        self._estimator: StreamingEstimator | None = None
-        self._encoder: messages.Encoder | None = None
-        self._hold = np.zeros(0)
-        self._effort_scale = self._effort_offset = np.zeros(0)
-        self._contact: ContactDetector | None = None
-        self._aligner: Aligner | None = None
-        if settings.base_source != "fixed":
-            tracker = BaseTracker(settings.base_source, settings.estimator, settings.gravity, log)
-            self._aligner = Aligner(tracker, settings.base_max_delay, log)
+        self._inputs: LiveInputs | None = None
+        self._state: ComputeState | None = None
+        self._encoder: encoder.Encoder | None = None
         for link in (*settings.accel_links, *settings.imu_links, *settings.wrench_links):
             if not is_token(link):
                 raise ModelError(f"link {link!r} cannot be part of a ROS 2 topic name (letters, digits, _)")
         if settings.robot_description:
-            self.set_model(load_model(settings.robot_description, root_link=settings.root_link, log=log), "parameter")
+            self.set_model(
+                load_model(settings.robot_description, root_link=settings.root_link, log=log), "parameter"
+            )
         else:
             self._log.once(
                 "waiting",
@@ -118,19 +112,6 @@ class Pipeline:
                     f"{parameter} name joints that robot {model.name!r} does not have (or mimic joints, which "
                     f"follow their leader): {', '.join(unknown)}; ignored",
                 )
-        self._hold = hold_vector(model.joint_names, settings.hold_positions)
-        self._effort_scale = np.array([settings.effort_scale.get(n, 1.0) for n in model.joint_names])
-        self._effort_offset = np.array([settings.effort_offset.get(n, 0.0) for n in model.joint_names])
-        self._contact = (
-            ContactDetector(
-                np.array([settings.contact_thresholds.get(n, np.nan) for n in model.joint_names]),
-                settings.contact_debounce,
-                model.joint_names,
-                self._log,
-            )
-            if settings.contact_thresholds
-            else None
-        )
         if settings.dynamics_needed:
             for warning in model.inertia_warnings:
                 self._log.log(logging.WARNING, warning)
@@ -145,13 +126,8 @@ class Pipeline:
         kernel_of(model)  # generate the recursion now, not while the first joint states wait
         self.model = model
         self._supplied_names = JointMessageReader(model.joint_names, model.mimic_joint_names, self._log)
-        self._estimator = StreamingEstimator(
-            model.joint_names,
-            wrap=model.continuous_columns,
-            ignored_names=model.mimic_joint_names,
-            settings=self.settings.estimator,
-            log=self._log_function,
-        )
+        self._inputs = LiveInputs(model, settings, self._log_function)
+        self._state = ComputeState.new(model, settings, self._log_function)
         self._log.log(
             logging.INFO,
             f"model {model.name!r} from the {source}: {len(model.link_names)} links, {len(model.joint_names)} joints, "
@@ -195,7 +171,7 @@ class Pipeline:
     def encode(self, result: Result) -> list[tuple[str, bytes]]:
         """(topic, CDR bytes) for every output of one result: what the runtimes publish."""
         if self._encoder is None or self._encoder.settings is not self.settings:
-            self._encoder = messages.Encoder(self.settings)
+            self._encoder = encoder.Encoder(self.settings)
         return self._encoder.encode(result)
 
     # -- input ------------------------------------------------------------------------------
@@ -211,34 +187,39 @@ class Pipeline:
         receive_ns: int | None = None,
     ) -> list[Result]:
         """A sensor_msgs/JointState's fields; returns the results it completes (see the estimator's modes)."""
-        if self._estimator is None:
+        if self._inputs is None:
             self._log.every("no-model", logging.WARNING, "joint states dropped: no robot model yet")
             return []
         try:
-            estimates = self._estimator.update(stamp_ns, names, positions, velocities, efforts, receive_ns=receive_ns)
-            if self._aligner is not None:  # each waits for the base motion at its stamp
-                self._aligner.add(estimates)
-                return self._aligned()
-            return [r for r in (self._result(e) for e in estimates) if r is not None]
+            inputs = self._inputs.joint_state(stamp_ns, names, positions, velocities, efforts, receive_ns)
         except Exception as exc:
             self._log.every("internal", logging.ERROR, f"joint state dropped: {type(exc).__name__}: {exc}")
             return []
+        return self._results(inputs)
 
     def on_base(self, message: BaseMessage) -> list[Result]:
         """A base sensor_msgs/Imu or nav_msgs/Odometry (``base.source``); returns the results of the
         joint states it lets out."""
-        if self._aligner is None:
+        if self._inputs is None:
             return []
         try:
-            self._aligner.tracker.on_message(message)
-            return self._aligned()
+            inputs = self._inputs.base(message)
         except Exception as exc:
             self._log.every("internal", logging.ERROR, f"base message dropped: {type(exc).__name__}: {exc}")
             return []
+        return self._results(inputs)
 
-    def _aligned(self) -> list[Result]:
-        assert self._aligner is not None
-        return [r for r in (self._result(e, sample) for e, sample in self._aligner.ready()) if r is not None]
+    def _results(self, inputs: list[Inputs]) -> list[Result]:
+        out = []
+        for states, base in inputs:
+            try:
+                result = self._compute(states, base)
+            except Exception as exc:
+                self._log.every("internal", logging.ERROR, f"joint state dropped: {type(exc).__name__}: {exc}")
+                continue
+            if result is not None:
+                out.append(result)
+        return out
 
     def on_joint_trajectory(
         self,
@@ -305,110 +286,40 @@ class Pipeline:
                 + ", ".join(missing),
             )
             return None
-        estimate = JointEstimate(
-            stamp_ns=stamp,
-            segment=0,
-            positions=state[0],
-            velocities=state[1],
-            accelerations=state[2],
-            ages=np.zeros(len(model.joint_names)),
-            ready=np.ones(len(model.joint_names), dtype=bool),
-            efforts=efforts,
-        )
-        return self._result(estimate)
+        n = len(model.joint_names)
+        ready = np.ones(n, dtype=bool)
+        return self._compute(JointStates(stamp, state[0], state[1], state[2], ready, ~ready, efforts), None)
 
-    def _result(self, estimate: JointEstimate, base: LinkSample | None = None) -> Result | None:
-        """The recursion on one estimate, under the publish policy (:mod:`.policy`) when some joints
-        have none; with the base source's sample at its stamp for a moving base."""
+    def _compute(self, states: JointStates, base: LinkMotion | None) -> Result | None:
+        """The computation on one stamp, and what the node says when some joints have no estimate."""
+        model, state = self.model, self._state
+        assert model is not None and state is not None
+        computed = compute(model, self.settings, states, base, state)
+        if not computed.known.all() or computed.base_unknown:
+            self._say_why(computed, base)
+        return computed.result
+
+    def _say_why(self, computed: Computed, base: LinkMotion | None) -> None:
         model = self.model
         assert model is not None
-        settings = self.settings
-        q, qd, qdd = estimate.positions, estimate.velocities, estimate.accelerations
-        determined = None
-        if not estimate.all_ready:
-            silent = estimate.ages > settings.estimator.max_gap
-            published = apply_policy(settings.publish_policy, q, qd, qdd, estimate.ready, silent, self._hold)
-            if not published.known.all():
-                waiting = ", ".join(n for n, ok in zip(model.joint_names, published.known, strict=True) if not ok)
-                why = "never received, silent for longer than max_gap, or warming up (see the estimator's log)"
-                if not published.publish:
-                    self._log.every(
-                        "not-ready", logging.WARNING, f"nothing published: no estimate for joint(s) {waiting} ({why})"
-                    )
-                    return None
-                determined = model.determined_links(published.known)
-                self._log.every(
-                    "partial",
-                    logging.WARNING,
-                    f"publishing {int(determined.sum())} of {len(determined)} links: no estimate for joint(s) "
-                    f"{waiting} ({why}); the links they move are left out",
-                )
-            q, qd, qdd = published.q, published.qd, published.qdd
-        # The estimator's and the supplied states are finite by construction: no input checks here.
-        world = None
-        if base is None:
-            root = root_state(settings.gravity)
-        else:
-            moving = self._base_motion(q, qd, qdd, base, determined)
-            if moving is None:
-                return None
-            root, world = moving
-        table = kinematics_table(model, q, qd, qdd, root)
-        result = make_result(model, estimate.stamp_ns, table, determined)
-        if world is not None:
-            result = replace(result, world=world)
-        if settings.dynamics_needed and determined is None:
-            result = self._with_dynamics(result, estimate, q, qd, table)
-        return result
-
-    def _base_motion(
-        self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, sample: LinkSample, determined: np.ndarray | None
-    ) -> tuple[tuple[float, ...], tuple[np.ndarray, np.ndarray] | None] | None:
-        """The root's state from the base source's link motion, and the root's pose in the world
-        (rotation root -> world, position) when the source gives orientation; None (logged) when the
-        measured link is unknown or not determined."""
-        model = self.model
-        assert model is not None and self._aligner is not None
-        link = self.settings.base_link or self._aligner.tracker.frame_id
-        index = model.link_index.get(link)
-        if index is None or (determined is not None and not determined[index]):
-            why = "not a link of the model" if index is None else "a joint above it has no estimate"
+        why = "never received, silent for longer than max_gap, or warming up (see the estimator's log)"
+        waiting = ", ".join(n for n, ok in zip(model.joint_names, computed.known, strict=True) if not ok)
+        if not computed.publish and not computed.base_unknown:
+            self._log.every(
+                "not-ready", logging.WARNING, f"nothing published: no estimate for joint(s) {waiting} ({why})"
+            )
+        elif computed.base_unknown and base is not None:
+            unknown = base.link not in model.link_index
+            reason = "not a link of the model" if unknown else "a joint above it has no estimate"
             self._log.every(
                 "base-link",
                 logging.WARNING,
-                f"nothing published: the base source measures link {link!r}, {why} (set base.link)",
+                f"nothing published: the base source measures link {base.link!r}, {reason} (set base.link)",
             )
-            return None
-        motion = base_from_link(
-            model,
-            link,
-            q,
-            qd,
-            qdd,
-            omega=sample.omega,
-            alpha=sample.alpha,
-            specific_force=sample.specific_force,
-            velocity=sample.velocity,
-        )
-        world = None
-        if sample.orientation is not None:
-            # root -> world = (link -> world) (link -> root)^T, at these joint states
-            rotation, position = link_pose(model, q, index)
-            world_link = rotation_matrix(sample.orientation)
-            world_root = world_link @ rotation.T
-            origin = np.zeros(3) if sample.position is None else sample.position - world_root @ position
-            world = (world_root, origin)
-        return motion.root(None), world
-
-    def _with_dynamics(
-        self, result: Result, estimate: JointEstimate, q: np.ndarray, qd: np.ndarray, table: np.ndarray
-    ) -> Result:
-        """The result with its joint torques, joint wrenches and contact state (every joint known)."""
-        model = self.model
-        assert model is not None
-        force, moment, torques = split_values(model, wrenches_from_table(model, q, table))
-        efforts = estimate.efforts if estimate.efforts is not None else np.full(len(model.joint_names), np.nan)
-        measured = self._effort_scale * efforts + self._effort_offset
-        dynamics = Dynamics(model.joint_names, q, qd, torques, measured, force, moment)
-        contact = self._contact.update(estimate.stamp_ns, dynamics.external) if self._contact is not None else None
-        return replace(result, dynamics=dynamics, contact=contact)
+        elif computed.result is not None:
+            self._log.every(
+                "partial",
+                logging.WARNING,
+                f"publishing {len(computed.result.link_names)} of {len(model.link_names)} links: no estimate for "
+                f"joint(s) {waiting} ({why}); the links they move are left out",
+            )

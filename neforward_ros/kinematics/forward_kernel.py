@@ -1,6 +1,6 @@
 """The forward recursion's arithmetic, generated per model as straight-line Python.
 
-:func:`kernel_source` writes the recursion of :mod:`neforward_ros.recursion` out for one model,
+:func:`kernel_source` writes the recursion of :mod:`neforward_ros.kinematics.forward` out for one model,
 link by link and component by component, with the model's constants folded in: a joint axis along
 z, an origin rotation of a quarter turn, a centre of mass at the link origin, the root at rest,
 each make most products vanish, and what vanishes is never computed. The same code runs on Python
@@ -19,7 +19,7 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from neforward_ros.codegen import Emitter, PerModel, Value, compile_function, finish, mat_mat, mat_vec, mul
+from neforward_ros.kinematics.codegen import Emitter, PerModel, Value, compile_function, finish, mat_mat, mat_vec, mul
 from neforward_ros.model import JointKind, RobotModel
 
 FIELDS = (

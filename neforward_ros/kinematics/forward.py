@@ -17,7 +17,7 @@ accelerations are classical (second derivatives of point positions), not the lin
 spatial acceleration: they match Pinocchio's ``getFrameClassicalAcceleration(..., LOCAL)`` plus
 ``-R^T g``.
 
-The arithmetic is generated per model by :mod:`neforward_ros.kernel` as straight-line Python with
+The arithmetic is generated per model by :mod:`neforward_ros.kinematics.forward_kernel` as straight-line Python with
 the model's constants folded in. Given Python floats it computes one sample with no numpy call at
 all; given numpy arrays of shape (T,) it computes T samples at once, vectorised over the samples.
 """
@@ -34,7 +34,7 @@ from typing import Any, Literal
 import numpy as np
 
 from neforward_ros.errors import InputError
-from neforward_ros.kernel import ROW, SLICES, kernel_of
+from neforward_ros.kinematics.forward_kernel import ROW, SLICES, kernel_of
 from neforward_ros.model import RobotModel
 
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)

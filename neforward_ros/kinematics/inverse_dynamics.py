@@ -1,10 +1,10 @@
 """Inverse dynamics: joint torques and the wrenches the joints transmit, by the backward recursion.
 
-:func:`inverse_dynamics` completes the forward recursion of :mod:`neforward_ros.recursion` with its
+:func:`inverse_dynamics` completes the forward recursion of :mod:`neforward_ros.kinematics.forward` with its
 backward pass (Luh, Walker and Paul): from each link's omega, alpha and centre-of-mass specific
 force, Newton's and Euler's equations give, leaves to root, the force and moment each link receives
 from its parent through its parent joint, and the torque (or force) each joint must produce. The
-arithmetic is generated per model (:mod:`neforward_ros.dynamics_kernel`), for one sample on floats
+arithmetic is generated per model (:mod:`neforward_ros.kinematics.backward_kernel`), for one sample on floats
 or for T samples at once on numpy arrays.
 """
 
@@ -18,11 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from neforward_ros.dynamics_kernel import KIN_FIELDS, backward_of, dynamics_of
 from neforward_ros.errors import InputError
-from neforward_ros.kernel import SLICES
-from neforward_ros.model import RobotModel
-from neforward_ros.recursion import (
+from neforward_ros.kinematics.backward_kernel import KIN_FIELDS, backward_of, dynamics_of
+from neforward_ros.kinematics.forward import (
     DEFAULT_GRAVITY,
     BaseMotion,
     LinkKinematics,
@@ -32,6 +30,8 @@ from neforward_ros.recursion import (
     packer_of,
     root_state,
 )
+from neforward_ros.kinematics.forward_kernel import SLICES
+from neforward_ros.model import RobotModel
 
 _CHUNK = 4096  # samples per vectorised pass
 _WARNED: set[int] = set()

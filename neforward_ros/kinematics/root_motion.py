@@ -15,9 +15,9 @@ from typing import Any
 import numpy as np
 
 from neforward_ros.errors import InputError
-from neforward_ros.kernel import SLICES
+from neforward_ros.kinematics.forward import BaseMotion, check_joint_arrays, kinematics_table
+from neforward_ros.kinematics.forward_kernel import SLICES
 from neforward_ros.model import RobotModel
-from neforward_ros.recursion import BaseMotion, check_joint_arrays, kinematics_table
 
 
 def base_from_link(
@@ -86,7 +86,8 @@ def base_from_link(
 
 
 def link_pose(model: RobotModel, q: np.ndarray, index: int) -> tuple[np.ndarray, np.ndarray]:
-    """One link's rotation link -> root and origin in the root frame at q (n,)."""
+    """One link's rotation link -> root, (3, 3), and origin in the root frame, (3,), at q (n,); or
+    (T, 3, 3) and (T, 3) at q (T, n)."""
     zeros = np.zeros_like(q)
-    row = kinematics_table(model, q, zeros, zeros, (0.0,) * 12)[index]
-    return row[SLICES["rotation"]].reshape(3, 3), row[SLICES["position"]]
+    row = kinematics_table(model, q, zeros, zeros, (0.0,) * 12)[..., index, :]
+    return row[..., SLICES["rotation"]].reshape((*row.shape[:-1], 3, 3)), row[..., SLICES["position"]]

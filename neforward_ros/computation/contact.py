@@ -1,9 +1,10 @@
 """Contact detection: thresholds on the external torques, with a debounce.
 
-A joint is over its threshold when |external torque| (measured effort minus the model's torque)
-exceeds it. ``~/contact`` turns true when some watched joint has been over its threshold for
-``debounce`` seconds, and false again when none has been for ``debounce`` seconds: a spike shorter
-than that (noise, a stick-slip) changes nothing.
+A joint is over its threshold when |external torque| exceeds it. ``~/contact`` turns true when some
+watched joint has been over its threshold for ``debounce`` seconds, and false again when none has
+been for ``debounce`` seconds: a spike shorter than that (noise, a stick-slip) changes nothing. The
+detector is the computation's state that runs on from one stamp to the next (the node holds one for
+its run, the bag tool one per recording), fed in stamp order.
 """
 
 from __future__ import annotations
@@ -61,3 +62,12 @@ class ContactDetector:
             joints = ", ".join(n for n, o in zip(self.joint_names, over, strict=True) if o)
             self._log.log(logging.INFO, f"contact: {'joint(s) ' + joints + ' over threshold' if now else 'none'}")
         return self.state
+
+    def update_many(self, stamps: np.ndarray, external: np.ndarray, usable: np.ndarray) -> np.ndarray:
+        """The states at T stamps, in order: (T,) 1.0 or 0.0, NaN where not ``usable`` (a stamp without
+        every joint's state) or no watched joint has a measured effort."""
+        out = np.full(len(stamps), np.nan)
+        for i in np.flatnonzero(usable):
+            state = self.update(int(stamps[i]), external[i])
+            out[i] = np.nan if state is None else float(state)
+        return out

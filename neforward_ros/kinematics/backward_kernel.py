@@ -30,8 +30,8 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from neforward_ros.codegen import Emitter, PerModel, Value, compile_function, finish, mat_vec
-from neforward_ros.kernel import com_motion, joint_transform, link_state
+from neforward_ros.kinematics.codegen import Emitter, PerModel, Value, compile_function, finish, mat_vec
+from neforward_ros.kinematics.forward_kernel import com_motion, joint_transform, link_state
 from neforward_ros.model import JointKind, RobotModel
 
 KIN_FIELDS = ("omega", "alpha", "com_accel")

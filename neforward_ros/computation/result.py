@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from neforward_ros.kernel import SLICES
+from neforward_ros.kinematics.forward import LinkKinematics
+from neforward_ros.kinematics.forward_kernel import SLICES
 from neforward_ros.model import RobotModel
-from neforward_ros.recursion import LinkKinematics
 
 
 @dataclass(frozen=True)
@@ -57,7 +57,7 @@ class Result:
         stamp_ns: the stamp of the joint state it comes from, integer nanoseconds; (T,) for a batch.
         link_names, root_link: the links published, in the model's order, and the model's root.
         table: the recursion's rows of those links, (n_links, ROW) or (T, n_links, ROW)
-            (see :func:`neforward_ros.recursion.kinematics_table`).
+            (see :func:`neforward_ros.kinematics.forward.kinematics_table`).
         link_ids: each row's link index in the model (marker ids); None when the rows are every link.
         determined: a batch's (T, n_links) per sample, whether the link's numbers are estimates (every
             joint that moves it had one); None when all are. :meth:`runs` splits a batch by it.

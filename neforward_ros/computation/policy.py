@@ -18,8 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-PUBLISH_POLICIES = ("partial", "wait", "hold")
-
 
 @dataclass(frozen=True)
 class Published:

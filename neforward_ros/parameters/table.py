@@ -1,0 +1,195 @@
+"""The node's ROS 2 parameters, declared once for every runtime and the bag tool.
+
+The rclpy adapter declares them from :data:`PARAMETERS` (with their descriptions), the no-ROS runtime
+and the bag tool read the same names from a ROS 2 params file and ``-p`` arguments, and
+:func:`neforward_ros.parameters.settings.node_settings` turns the values into validated settings. The
+README table and ``config/neforward.yaml`` are checked against this table by the tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW
+from neforward_ros.estimation.motion import KalmanSettings
+from neforward_ros.estimation.settings import DEFAULT_KALMAN_LAG, DEFAULT_MAX_GAP
+from neforward_ros.kinematics.forward import DEFAULT_GRAVITY
+
+PUBLISH_POLICIES = ("partial", "wait", "hold")
+BASE_SOURCES = ("fixed", "imu", "odometry")
+NODE_NAME = "neforward"
+ACCELERATION_SOURCES = ("estimate", "supplied")
+_KALMAN = KalmanSettings()
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One ROS 2 parameter: name, type (``bool``, ``int``, ``double``, ``string``, ``double[]``,
+    ``string[]``), default, meaning, and whether it can change while the node runs."""
+
+    name: str
+    type: str
+    default: Any
+    description: str
+    read_only: bool = True
+
+
+PARAMETERS: tuple[Parameter, ...] = (
+    Parameter(
+        "robot_description",
+        "string",
+        "",
+        "URDF XML of the robot. Empty: the model comes from the robot_description topic (transient local). "
+        "Setting it at run time reloads the model; an invalid URDF is rejected and the previous model kept.",
+        read_only=False,
+    ),
+    Parameter("root_link", "string", "", "Link whose frame is the root frame. Empty: the URDF's root link."),
+    Parameter(
+        "gravity",
+        "double[]",
+        list(DEFAULT_GRAVITY),
+        "Gravity in the root frame, m/s^2. Accelerations are specific forces (a - g); zeros give kinematic ones.",
+        read_only=False,
+    ),
+    Parameter(
+        "velocity_source",
+        "string",
+        "auto",
+        "Joint velocities: auto (the message's where present), message, or differentiate (from positions).",
+    ),
+    Parameter(
+        "acceleration_source",
+        "string",
+        "estimate",
+        "estimate: from joint_states. supplied: q, qd, qdd as given on joint_states_accel "
+        "(trajectory_msgs/JointTrajectory).",
+    ),
+    Parameter(
+        "estimator.method",
+        "string",
+        "polyfit",
+        "polyfit (local polynomial fit), kalman (Kalman filter / fixed-lag smoother, accurate at low delay) "
+        "or difference (a baseline).",
+    ),
+    Parameter(
+        "estimator.mode",
+        "string",
+        "fixed_lag",
+        "fixed_lag (each estimate lag behind the newest sample) or causal (at the newest sample, no delay).",
+    ),
+    Parameter(
+        "estimator.window",
+        "double",
+        DEFAULT_WINDOW,
+        "polyfit: width of the local fit, s. kalman: the samples an estimate needs before its stamp, s.",
+    ),
+    Parameter("estimator.order", "int", DEFAULT_ORDER, "Degree of the local polynomial (polyfit)."),
+    Parameter(
+        "estimator.lag",
+        "double",
+        -1.0,
+        f"fixed_lag delay, s, at most window. Negative: window / 2 (polyfit), {DEFAULT_KALMAN_LAG} (kalman).",
+    ),
+    Parameter(
+        "estimator.kalman.noise",
+        "double",
+        _KALMAN.noise,
+        "kalman: standard deviation of the positions' noise, rad (m); quantisation step / sqrt(12) for an encoder.",
+    ),
+    Parameter(
+        "estimator.kalman.velocity_noise",
+        "double",
+        _KALMAN.velocity_noise,
+        "kalman: standard deviation of the noise of velocities the messages carry, rad/s (m/s).",
+    ),
+    Parameter(
+        "estimator.kalman.length_scale",
+        "double",
+        _KALMAN.length_scale,
+        "kalman: s; about 0.65 / (the highest frequency of the joints' motion, Hz).",
+    ),
+    Parameter(
+        "estimator.kalman.magnitude",
+        "double",
+        _KALMAN.magnitude,
+        "kalman: typical excursion of the joints' motion about its trend, rad (m).",
+    ),
+    Parameter("max_gap", "double", DEFAULT_MAX_GAP, "A joint silent for longer than this, s, restarts its history."),
+    Parameter(
+        "publish_policy",
+        "string",
+        "partial",
+        "When some joints have no estimate: partial (publish the links every joint above which has one), "
+        "wait (publish nothing), or hold (joints silent for longer than max_gap held at hold.positions).",
+    ),
+    Parameter("hold.joint_names", "string[]", [], "hold: joints with a hold position other than 0."),
+    Parameter("hold.positions", "double[]", [], "hold: their positions, rad (m), in the order of hold.joint_names."),
+    Parameter(
+        "publish_torques",
+        "bool",
+        False,
+        "Publish ~/joint_torques (the model's) and ~/external_torques (measured effort - model) for every stamp "
+        "where every joint has an estimate.",
+    ),
+    Parameter("effort.joint_names", "string[]", [], "Joints whose efforts are scaled and offset before use."),
+    Parameter("effort.scale", "double[]", [], "Their scales (measured = scale * effort + offset), in that order."),
+    Parameter("effort.offset", "double[]", [], "Their offsets, N m (N), in that order."),
+    Parameter("wrench_links", "string[]", [], "Links that get ~/<link>/wrench: what their parent joint transmits."),
+    Parameter("contact.joint_names", "string[]", [], "Joints watched for contact: ~/contact (std_msgs/Bool)."),
+    Parameter("contact.thresholds", "double[]", [], "|external torque| above which each is in contact, N m (N)."),
+    Parameter(
+        "contact.debounce", "double", 0.02, "s a change (contact or none) must last before ~/contact follows it."
+    ),
+    Parameter(
+        "base.source",
+        "string",
+        "fixed",
+        "The base's motion: fixed (at rest; gravity in the root frame), imu (sensor_msgs/Imu on base.topic) or "
+        "odometry (nav_msgs/Odometry on base.topic).",
+    ),
+    Parameter("base.topic", "string", "", "The base source's topic. Empty: imu, or odom for odometry."),
+    Parameter(
+        "base.link",
+        "string",
+        "",
+        "The link the base source measures (IMU frame, odometry child frame). Empty: the message's frame id.",
+    ),
+    Parameter(
+        "base.max_delay",
+        "double",
+        0.5,
+        "s a joint state waits for the base motion at its stamp before it is dropped with a warning.",
+    ),
+    Parameter(
+        "world_frame",
+        "string",
+        "",
+        "With a base source that gives orientation: frame id of ~/world_link_states. Empty: not published.",
+    ),
+    Parameter("accel_links", "string[]", [], "Links that get ~/<link>/accel and ~/<link>/twist (link frame)."),
+    Parameter("imu_links", "string[]", [], "Links that get a virtual IMU, ~/<link>/imu (sensor_msgs/Imu)."),
+    Parameter("publish_markers", "bool", False, "Publish ~/markers: an arrow per link for its COM acceleration."),
+    Parameter("marker_scale", "double", 0.02, "Arrow length per unit of acceleration, m per m/s^2.", read_only=False),
+    Parameter(
+        "frame_prefix",
+        "string",
+        "",
+        "Prefix of every frame_id, as robot_state_publisher's frame_prefix.",
+        read_only=False,
+    ),
+    Parameter(
+        "qos_depth",
+        "int",
+        500,
+        "Keep-last depth of the input subscriptions (joint states, supplied states, base): 500 holds 0.5 s of a "
+        "1 kHz stream, so that a stall of the node (a model reload, the machine busy) loses nothing.",
+    ),
+)
+"""Every parameter, in README order. ROS 2's own (``use_sim_time``, ...) and ``qos_overrides.*`` are not listed."""
+
+DEFAULTS: Mapping[str, Any] = {p.name: p.default for p in PARAMETERS}
+
+ROS_OWN_PARAMETERS = ("use_sim_time", "start_type_description_service")
+"""Parameters every ROS 2 Jazzy node declares itself; accepted in files, not ours to interpret."""
