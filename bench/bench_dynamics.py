@@ -18,7 +18,9 @@ Usage: python bench/bench_dynamics.py [--samples 10000] [--repeats 7]
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +38,7 @@ URDF = ROOT / "config" / "panda.urdf"
 
 
 def main() -> None:
+    os.environ.setdefault("NEFORWARD_CACHE", tempfile.mkdtemp(prefix="neforward-bench-cache-"))  # cold first
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=10_000)
     parser.add_argument("--repeats", type=int, default=7)
@@ -73,6 +76,7 @@ def main() -> None:
                 inverse_dynamics(model, q[t], qd[t], qdd[t], kinematics=kinematics[t]) for t in range(singles)
             ],
             "pinocchio rnea + fill": lambda: [peer.rnea_fill(ids, *pin_inputs[t]) for t in range(singles)],
+            "pinocchio bare rnea": lambda: [peer.rnea_only(*pin_inputs[t]) for t in range(singles)],
         },
         args.repeats,
     )
@@ -83,13 +87,21 @@ def main() -> None:
     print(f"  ratio pinocchio / neforward:                   {ratio:.2f}x  (target >= 1)")
     print(f"  ratio pinocchio / neforward, kinematics given: "
           f"{single['pinocchio rnea + fill'] / single['neforward, kinematics given']:.2f}x")  # fmt: skip
+    print(
+        f"  ratio pinocchio bare rnea / neforward:         "
+        f"{single['pinocchio bare rnea'] / single['neforward']:.2f}x  (the floor: the call, no wrenches copied)"
+    )
 
     compare_batches(
         lambda: inverse_dynamics(model, q, qd, qdd, gravity=GRAVITY),
-        lambda: [peer.rnea_fill(ids, *x) for x in pin_inputs],
+        {
+            "pinocchio loop (arrays)": lambda: [peer.rnea_fill(ids, *x) for x in pin_inputs],
+            "pinocchio loop (bare rnea)": lambda: [peer.rnea_only(*x) for x in pin_inputs],
+        },
         args.samples,
         args.repeats,
-        10,
+        1.5e6,
+        inverse_dynamics(model, q[:2], qd[:2], qdd[:2]).force.base.nbytes // 2,
     )
 
 

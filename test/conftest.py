@@ -41,6 +41,7 @@ OPTIONAL = {
 REQUIREMENTS = {
     "test_bag.py": ("rosbags", "pinocchio"),
     "test_bag_options.py": ("rosbags", "pinocchio"),
+    "test_node_and_bag_agree.py": ("rosbags",),
     "test_bag_plot.py": ("matplotlib",),
     "test_fleet.py": ("rosbags", "pinocchio"),
     "test_interrupts.py": ("rosbags", "pinocchio"),

@@ -135,6 +135,10 @@ class PinocchioOracle:
         """Pinocchio's joint id for each link's parent joint (0, the universe, for the root); needs unfix."""
         return [0 if name is None else self.model.getJointId(name) for name in parent_joint_names]
 
+    def rnea_only(self, qp, vp, ap) -> np.ndarray:
+        """pin.rnea alone: the joint torques, the wrenches left in data.f (a floor, not the same outputs)."""
+        return pin.rnea(self.model, self.data, qp, vp, ap)
+
     def rnea_fill(self, joint_ids: list[int], qp, vp, ap, fext=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """pin.rnea, and per link the wrench through its joint (data.f), as an efficient Pinocchio user
         collects them: (tau, force (n_links, 3), moment (n_links, 3)). The root's is left zero."""

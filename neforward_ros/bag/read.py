@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from neforward_ros.bag import mcap_read
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.report import BagReport
 from neforward_ros.computation.base_motion import BaseMessage, base_message
@@ -73,13 +74,17 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
         total = max(sum(c.msgcount for c in connections), 1)
         report = BagReport(joint_states_topic=topic, messages=0, notes=warnings)
         raws: list[bytes] = []
-        log_times: list[int] = []
+        log_times: Any = []
         try:
-            for index, (_, log_time, raw) in enumerate(reader.messages(connections=connections)):
-                raws.append(raw)
-                log_times.append(log_time)
-                if index % 2048 == 0:
-                    progress("reading", index / total)
+            fast = mcap_read.messages(reader, connections)
+            if fast is not None:
+                raws, log_times = fast
+            else:
+                for index, (_, log_time, raw) in enumerate(reader.messages(connections=connections)):
+                    raws.append(raw)
+                    log_times.append(log_time)
+                    if index % 2048 == 0:
+                        progress("reading", index / total)
             decoded = cdr.decode_joint_states(raws)
         except InputError as exc:
             raise InputError(f"{source}: corrupt joint state message: {exc}") from exc

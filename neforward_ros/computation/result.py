@@ -186,7 +186,6 @@ _ROTATED = ("velocity", "omega", "accel", "alpha", "com_velocity", "com_accel")
 _ROTATED_COLUMNS = np.concatenate([np.arange(SLICES[name].start, SLICES[name].stop) for name in _ROTATED])
 _LINK_POSE = np.r_[SLICES["position"], SLICES["orientation"]]
 _COM_POSE = np.r_[SLICES["com_position"], SLICES["orientation"]]
-_W = SLICES["orientation"].stop - 1
 _COM_VELOCITIES = np.r_[12:15, 3:6]  # of the 18 rotated numbers: com_velocity, omega
 _COM_ACCELERATIONS = np.r_[15:18, 9:12]  # com_accel, alpha
 
@@ -194,52 +193,16 @@ Blocks = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def state_blocks(table: np.ndarray) -> tuple[Blocks, Blocks]:
-    """The numbers of link_states and of com_states, in one pass over the recursion's rows: for each,
-    transforms (..., n, 7) = translation, rotation (x, y, z, w); velocities (..., n, 6) = linear,
-    angular; accelerations likewise, every vector along the root axes. Works on batched results too."""
-    if table.ndim == 2:  # one sample: the six vectors of every link rotated by one matmul
-        rotation = table[:, SLICES["rotation"]].reshape(-1, 3, 3)
-        vectors = table[:, _ROTATED_COLUMNS].reshape(-1, 6, 3)
-        rotated = np.matmul(vectors, rotation.transpose(0, 2, 1)).reshape(-1, 18)  # rows (R v)^T
-        sign = np.copysign(1.0, table[:, _W : _W + 1])  # quaternions with w >= 0
-        link_pose, com_pose = table[:, _LINK_POSE], table[:, _COM_POSE]
-        link_pose[:, 3:] *= sign
-        com_pose[:, 3:] *= sign
-        return (
-            (link_pose, rotated[:, 0:6], rotated[:, 6:12]),
-            (com_pose, rotated[:, _COM_VELOCITIES], rotated[:, _COM_ACCELERATIONS]),
-        )
-    return _state_blocks_batched(np.moveaxis(table, 0, -1))
-
-
-def _state_blocks_batched(fields: np.ndarray) -> tuple[Blocks, Blocks]:
-    """:func:`state_blocks` of T samples from the rows field by field, (n, ROW, T): each number is an
-    (n, T) array, so rotating is 45 vectorised products, not T * n tiny matrix products."""
-
-    def column(name: str, k: int) -> np.ndarray:
-        return fields[:, SLICES[name].start + k]
-
-    rotation = [column("rotation", k) for k in range(9)]
-
-    def rotated(name: str) -> list[np.ndarray]:
-        v = [column(name, k) for k in range(3)]
-        return [rotation[3 * i] * v[0] + rotation[3 * i + 1] * v[1] + rotation[3 * i + 2] * v[2] for i in range(3)]
-
-    sign = np.copysign(1.0, column("orientation", 3))
-    orientation = [column("orientation", k) * sign for k in range(4)]
-    omega, alpha = rotated("omega"), rotated("alpha")
-
-    def block(parts: list[np.ndarray]) -> np.ndarray:  # (n, T) each -> (T, n, len(parts))
-        return np.stack([part.T for part in parts], axis=-1)
-
-    link = (
-        block([*(column("position", k) for k in range(3)), *orientation]),
-        block([*rotated("velocity"), *omega]),
-        block([*rotated("accel"), *alpha]),
+    """The numbers of link_states and of com_states, in one pass over the recursion's rows ((n, ROW) or
+    (T, n, ROW)): for each, transforms (..., n, 7) = translation, rotation (x, y, z, w; w >= 0, as the
+    kernel gives it); velocities (..., n, 6) = linear, angular; accelerations likewise, every vector
+    along the root axes (the six vectors of every link rotated by one matmul)."""
+    leading = table.shape[:-1]
+    rotation = table[..., SLICES["rotation"]].reshape(*leading, 3, 3)
+    vectors = table[..., _ROTATED_COLUMNS].reshape(*leading, 6, 3)
+    rotated = np.matmul(vectors, np.swapaxes(rotation, -1, -2)).reshape(*leading, 18)  # rows (R v)^T
+    link_pose, com_pose = table[..., _LINK_POSE], table[..., _COM_POSE]
+    return (
+        (link_pose, rotated[..., 0:6], rotated[..., 6:12]),
+        (com_pose, rotated[..., _COM_VELOCITIES], rotated[..., _COM_ACCELERATIONS]),
     )
-    com = (
-        block([*(column("com_position", k) for k in range(3)), *orientation]),
-        block([*rotated("com_velocity"), *omega]),
-        block([*rotated("com_accel"), *alpha]),
-    )
-    return link, com

@@ -27,10 +27,7 @@ Both return one flat tuple: per link f (3) and n (3), in link order, then the jo
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from typing import Any
-
-from neforward_ros.kinematics.codegen import Emitter, PerModel, Value, compile_function, finish, mat_vec
+from neforward_ros.kinematics.codegen import Emitter, Kernel, PerModel, Value, finish, mat_vec
 from neforward_ros.kinematics.forward_kernel import com_motion, joint_transform, link_state
 from neforward_ros.model import JointKind, RobotModel
 
@@ -141,31 +138,21 @@ def _backward(em: Emitter, model: RobotModel, states: list[dict], external: bool
     return outputs
 
 
-def _compile(model: RobotModel, variant: tuple[bool, bool]) -> Callable[..., tuple[Any, ...]]:
+def _compile(model: RobotModel, variant: tuple[bool, bool]) -> Kernel:
     from_kinematics, external = variant
     name = "backward" if from_kinematics else "dynamics"
     source = dynamics_source(model, from_kinematics=from_kinematics, external=external)
-    return compile_function(source, name, f"{name} {model.name}")
+    return Kernel(source, name, f"{name} {model.name}")
 
 
 _FUNCTIONS = PerModel(_compile)
 
 
-def dynamics_of(model: RobotModel, *, external: bool = False) -> Callable[..., tuple[Any, ...]]:
+def dynamics_of(model: RobotModel, *, external: bool = False) -> Kernel:
     """The model's ``dynamics`` function (forward and backward in one), compiled once."""
     return _FUNCTIONS(model, (False, external))
 
 
-def backward_of(model: RobotModel, *, external: bool = False) -> Callable[..., tuple[Any, ...]]:
+def backward_of(model: RobotModel, *, external: bool = False) -> Kernel:
     """The model's ``backward`` function (from the forward recursion's results), compiled once."""
     return _FUNCTIONS(model, (True, external))
-
-
-def kin_columns(table: Sequence[Any], slices: dict[str, slice]) -> list[Any]:
-    """The ``kin`` argument of ``backward`` from the forward kernel's rows of one sample (n_links, ROW):
-    per link omega, alpha, com_accel as one flat list."""
-    out: list[Any] = []
-    for row in table:
-        for field in KIN_FIELDS:
-            out.extend(row[slices[field]])
-    return out

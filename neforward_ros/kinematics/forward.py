@@ -27,6 +27,7 @@ from __future__ import annotations
 import functools
 import math
 import struct
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Literal
@@ -131,9 +132,7 @@ class LinkKinematics:
         """Views into a table of the kernel's rows, (..., n_links, ROW)."""
         fields = {name: table[..., part] for name, part in SLICES.items()}
         fields["rotation"] = fields["rotation"].reshape((*table.shape[:-1], 3, 3))
-        orientation = fields["orientation"]
-        fields["orientation"] = orientation * np.copysign(1.0, orientation[..., 3:])  # w >= 0
-        return cls(link_names=link_names, **fields)
+        return cls(link_names=link_names, **fields)  # the kernel gives orientations with w >= 0
 
     def in_root(self) -> LinkKinematics:
         """The same kinematics with omega, alpha, velocity, accel, com_accel and com_velocity in root axes.
@@ -215,8 +214,20 @@ def kinematics_table(
     """
     kernel = kernel_of(model)
     n_links = len(model.link_names)
-    if q.ndim == 1:
-        values = kernel(q.tolist(), qd.tolist(), qdd.tolist(), root, math.sin, math.cos)
+    single = q.ndim == 1
+    native = kernel.compiled()
+    if native is not None:  # the same arithmetic, compiled: the same numbers, faster
+        count = 1 if single else q.shape[0]
+        if single or not isinstance(root[0], np.ndarray):
+            root_rows = np.array(root, dtype=float)
+        else:
+            root_rows = np.stack([np.broadcast_to(r, (count,)) for r in root], axis=1)
+        table = native([q, qd, qdd, root_rows], count)
+        return table.reshape(n_links, ROW) if single else table.reshape(count, n_links, ROW)
+    started = time.perf_counter()
+    if single:
+        values = kernel.python(q.tolist(), qd.tolist(), qdd.tolist(), root, math.sin, math.cos, math.copysign)
+        kernel.spent(time.perf_counter() - started)
         # struct packs a tuple of floats several times faster than np.array converts it.
         packer = packer_of(len(values))
         buffer = bytearray(packer.size)
@@ -230,9 +241,10 @@ def kinematics_table(
     for start in range(0, count, _CHUNK):
         part = slice(start, min(count, start + _CHUNK))
         chunk_root = [r[part] if isinstance(r, np.ndarray) else r for r in root]
-        values = kernel(*(c[:, part] for c in columns), chunk_root, np.sin, np.cos)
+        values = kernel.python(*(c[:, part] for c in columns), chunk_root, np.sin, np.cos, np.copysign)
         for row, value in enumerate(values):
             rows[row, part] = value
+    kernel.spent(time.perf_counter() - started)
     return rows.reshape(n_links, ROW, count).transpose(2, 0, 1)
 
 

@@ -7,7 +7,7 @@ each make most products vanish, and what vanishes is never computed. The same co
 floats (one sample: no numpy call at all) and on numpy arrays of shape (T,) (T samples in one
 vectorised pass), like the CDR encoders of :mod:`neforward_ros.wire.cdr`.
 
-The generated function ``kernel(q, qd, qdd, root, sin, cos)`` takes the joint columns (sequences
+The generated function ``kernel(q, qd, qdd, root, sin, cos, copysign)`` takes the joint columns (sequences
 indexed like ``model.joint_names``), the root's initial state ``root`` = (omega, alpha, v, a) as 12
 values in the root frame, and returns one flat tuple: per link, in ``model.link_names`` order, the
 ``ROW`` numbers described by :data:`FIELDS`.
@@ -16,10 +16,10 @@ values in the root frame, and returns one flat tuple: per link, in ``model.link_
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from typing import Any
 
-from neforward_ros.kinematics.codegen import Emitter, PerModel, Value, compile_function, finish, mat_mat, mat_vec, mul
+from neforward_ros.kinematics.codegen import Emitter, Kernel, PerModel, Value, finish, mat_mat, mat_vec, mul
 from neforward_ros.model import JointKind, RobotModel
 
 FIELDS = (
@@ -32,7 +32,7 @@ FIELDS = (
     ("com_accel", 3),  # specific force at the centre of mass, link frame
     ("com_velocity", 3),  # linear velocity of the centre of mass, link frame
     ("com_position", 3),  # centre of mass in the root frame
-    ("orientation", 4),  # link -> root as a unit quaternion (x, y, z, w), either sign
+    ("orientation", 4),  # link -> root as a unit quaternion (x, y, z, w), w >= 0
 )
 """The numbers of each link's row, in order."""
 
@@ -81,10 +81,20 @@ def kernel_source(model: RobotModel) -> str:
         state["com_position"] = tuple(em.add(state["position"][i], com[i]) for i in range(3))
         states.append(state)
         for name, _ in FIELDS:
-            outputs.extend(state[name])
+            outputs.extend(_canonical(em, state[name]) if name == "orientation" else state[name])
     values = ", ".join(repr(float(v)) if not isinstance(v, str) else v for v in outputs)
     body = finish([*lines, f"    return ({values},)"])
-    return "def kernel(q, qd, qdd, root, sin, cos):\n" + "\n".join(body) + "\n"
+    return "def kernel(q, qd, qdd, root, sin, cos, copysign):\n" + "\n".join(body) + "\n"
+
+
+def _canonical(em: Emitter, quaternion: Sequence[Value]) -> tuple[Value, ...]:
+    """The quaternion with w >= 0 (the same rotation): multiplied by copysign(1, w)."""
+    w = quaternion[3]
+    if not isinstance(w, str):
+        sign = -1.0 if math.copysign(1.0, w) < 0 else 1.0
+        return tuple(em.combine([(sign, c)]) for c in quaternion)
+    sign_name = em.temp(f"copysign(1.0, {w})")
+    return tuple(em.combine([(1.0, mul(c, sign_name))]) for c in quaternion)
 
 
 def joint_transform(
@@ -208,9 +218,9 @@ def _quaternion_product(
     return _hamilton(em, origin, turn)
 
 
-def compile_kernel(model: RobotModel) -> Callable[..., tuple[Any, ...]]:
-    """The model's kernel as a Python function."""
-    return compile_function(kernel_source(model), "kernel", f"kernel {model.name}")
+def compile_kernel(model: RobotModel) -> Kernel:
+    """The model's kernel (its Python function, and its compiled form when there is a compiler)."""
+    return Kernel(kernel_source(model), "kernel", f"kernel {model.name}")
 
 
 kernel_of = PerModel(compile_kernel)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -141,32 +142,59 @@ def _result(model: RobotModel, values: np.ndarray) -> InverseDynamics:
 
 def _run_dynamics(model, states, root, external) -> np.ndarray:
     """``states``: (q, qd, qdd) as lists (one sample) or (T, n) arrays."""
-    function = dynamics_of(model, external=external is not None)
+    kernel = dynamics_of(model, external=external is not None)
     q, qd, qdd = states
-    if isinstance(q, list):
+    single = isinstance(q, list)
+    native = kernel.compiled()
+    if native is not None:  # the same arithmetic, compiled: the same numbers, faster
+        count = 1 if single else q.shape[0]
+        if single or not isinstance(root[0], np.ndarray):
+            root_rows = np.array(root, dtype=float)
+        else:
+            root_rows = np.stack([np.broadcast_to(r, (count,)) for r in root], axis=1)
+        fext = None if external is None else external.reshape(count, -1)
+        values = native([np.asarray(q, dtype=float), np.asarray(qd, dtype=float), np.asarray(qdd, dtype=float),
+                         root_rows, fext], count)  # fmt: skip
+        return values[0] if single else values
+    started = time.perf_counter()
+    if single:
         fext = None if external is None else external.reshape(-1).tolist()
-        return _array(function(q, qd, qdd, root, math.sin, math.cos, fext))
-    return _batched(
-        lambda part, fext: function(*(x[:, part] for x in (q.T, qd.T, qdd.T)), root, np.sin, np.cos, fext),
-        model,
-        q.shape[0],
-        external,
-    )
+        values = _array(kernel.python(q, qd, qdd, root, math.sin, math.cos, fext))
+    else:
+        values = _batched(
+            lambda part, fext: kernel.python(*(x[:, part] for x in (q.T, qd.T, qdd.T)), root, np.sin, np.cos, fext),
+            model,
+            q.shape[0],
+            external,
+        )
+    kernel.spent(time.perf_counter() - started)
+    return values
 
 
 def _run_backward(model, q, kin, external) -> np.ndarray:
-    function = backward_of(model, external=external is not None)
-    if q.ndim == 1:
+    kernel = backward_of(model, external=external is not None)
+    single = q.ndim == 1
+    native = kernel.compiled()
+    if native is not None:  # the same arithmetic, compiled: the same numbers, faster
+        count = 1 if single else q.shape[0]
+        fext = None if external is None else external.reshape(count, -1)
+        values = native([q, kin.reshape(count, -1), fext], count)
+        return values[0] if single else values
+    started = time.perf_counter()
+    if single:
         fext = None if external is None else external.reshape(-1).tolist()
-        return _array(function(q.tolist(), kin.reshape(-1).tolist(), math.sin, math.cos, fext))
-    flat_kin = np.ascontiguousarray(kin.reshape(kin.shape[0], -1).T)  # (n_links * 9, T)
-    q_columns = np.ascontiguousarray(q.T)
-    return _batched(
-        lambda part, fext: function(q_columns[:, part], flat_kin[:, part], np.sin, np.cos, fext),
-        model,
-        q.shape[0],
-        external,
-    )
+        values = _array(kernel.python(q.tolist(), kin.reshape(-1).tolist(), math.sin, math.cos, fext))
+    else:
+        flat_kin = np.ascontiguousarray(kin.reshape(kin.shape[0], -1).T)  # (n_links * 9, T)
+        q_columns = np.ascontiguousarray(q.T)
+        values = _batched(
+            lambda part, fext: kernel.python(q_columns[:, part], flat_kin[:, part], np.sin, np.cos, fext),
+            model,
+            q.shape[0],
+            external,
+        )
+    kernel.spent(time.perf_counter() - started)
+    return values
 
 
 def _array(values: tuple[float, ...]) -> np.ndarray:

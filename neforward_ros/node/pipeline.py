@@ -28,6 +28,7 @@ from neforward_ros.estimation.joint_messages import JointMessageReader
 from neforward_ros.interface import encoder, messages
 from neforward_ros.interface.names import is_token
 from neforward_ros.interface.topics import ROBOT_DESCRIPTION, Output, output_list
+from neforward_ros.kinematics.backward_kernel import backward_of
 from neforward_ros.kinematics.forward_kernel import kernel_of
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel, load_model
@@ -123,7 +124,11 @@ class Pipeline:
             )
         if settings.base_link and settings.base_link not in model.link_index:
             self._log.log(logging.ERROR, f"base.link {settings.base_link!r} is not a link of robot {model.name!r}")
-        kernel_of(model)  # generate the recursion now, not while the first joint states wait
+        # Generate the recursions now, not while the first joint states wait; compile them in a thread
+        # (the node takes the compiled kernels once they are ready: the same numbers, faster).
+        kernel_of(model).native.get(start=True)
+        if settings.dynamics_needed:
+            backward_of(model).native.get(start=True)
         self.model = model
         self._supplied_names = JointMessageReader(model.joint_names, model.mimic_joint_names, self._log)
         self._inputs = LiveInputs(model, settings, self._log_function)
