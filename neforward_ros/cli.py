@@ -1,5 +1,7 @@
 """The ``neforward`` command.
 
+- ``neforward calibrate``: recordings of free motion in, the joints' effort and friction model and
+  contact thresholds out, as a params file (:mod:`neforward_ros.calibration`).
 - ``neforward bag``: recordings in, the node's outputs out (:mod:`neforward_ros.bag`); ``neforward
   play``: a recording's topics (or a CSV's joint states) over DDS (:mod:`neforward_ros.dds.play`).
 - ``neforward demo``: the node live over loopback DDS, fed by a synthetic 500 Hz joint-state
@@ -110,6 +112,14 @@ def build_parser() -> argparse.ArgumentParser:
     from neforward_ros.bag.arguments import add_bag_arguments
 
     add_bag_arguments(bag)
+    calibrate = command(
+        "calibrate",
+        "recordings of free motion in: each joint's effort offset and scale, its friction and a contact threshold "
+        "out, as a params file",
+    )
+    from neforward_ros.calibration.commands import add_calibrate_arguments
+
+    add_calibrate_arguments(calibrate)
     return parser
 
 
@@ -145,6 +155,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from neforward_ros.bag.commands import run_bag
 
             return run_bag(args)
+        elif args.command == "calibrate":
+            from neforward_ros.calibration.commands import run_calibrate
+
+            return run_calibrate(args)
         elif args.command == "play":
             from neforward_ros.dds.play import play
 

@@ -55,6 +55,7 @@ REQUIREMENTS = {
     "test_torques.py": ("pinocchio",),
     "test_pipeline_messages.py": ("scipy", "rosbags", "pinocchio"),
     "test_recursion_pinocchio.py": ("pinocchio",),
+    "test_joint_space.py": ("pinocchio",),
 }
 
 

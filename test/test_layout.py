@@ -22,6 +22,7 @@ LAYERS = (
     ("interface",),
     ("node",),
     ("bag", "dds", "ros_node", "node_entry", "demo"),
+    ("calibration",),
     ("cli", "command", "__main__"),
 )
 """Bottom up: a module imports from its own layer or those below, never from above."""
@@ -31,7 +32,8 @@ APPLICATIONS = {"bag": "bag", "dds": "dds", "ros_node": "rclpy", "node_entry": "
 (the demo drives the no-ROS runtime as a user would, and may use its DDS helpers)."""
 
 COMMAND_LINE = ("neforward_ros.cli", "neforward_ros.command", "neforward_ros.__main__", "neforward_ros.bag.arguments",
-                "neforward_ros.bag.commands", "neforward_ros.dds.commands")  # fmt: skip
+                "neforward_ros.bag.commands", "neforward_ros.dds.commands",
+                "neforward_ros.calibration.commands")  # fmt: skip
 """Modules that read a command line: only the command line itself imports them."""
 
 

@@ -1,6 +1,7 @@
 """The compiled kernels give the Python kernels' numbers bit for bit (the same operations in the same
 order, no contraction, the C library's sin and cos as Python's), for one sample and for a batch,
-forward and backward, with and without external wrenches and a moving base; without a compiler
+forward and backward, with and without external wrenches and a moving base, and the joint-space
+terms (momentum, Coriolis, gravity, inertia matrix); without a compiler
 (NEFORWARD_NATIVE=off) the Python kernels serve."""
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ import pytest
 from neforward_ros import BaseMotion, forward_recursion, inverse_dynamics, load_model
 from neforward_ros.kinematics.backward_kernel import backward_of, dynamics_of
 from neforward_ros.kinematics.forward_kernel import kernel_of
+from neforward_ros.kinematics.joint_space import mass_matrix, momentum_terms
+from neforward_ros.kinematics.joint_space_kernel import mass_matrix_of, momentum_of
 from neforward_ros.kinematics.native import compiler
 
 from conftest import TEST_ROBOTS
@@ -24,7 +27,10 @@ def outputs(model, q, qd, qdd, base, wrenches):
     given = inverse_dynamics(model, q, qd, qdd, base=base, kinematics=kin, external_wrenches=wrenches)
     fields = ("omega", "alpha", "velocity", "accel", "com_accel", "com_velocity", "position", "rotation",
               "com_position", "orientation")  # fmt: skip
-    return [getattr(kin, f) for f in fields] + [dyn.joint_torque, dyn.wrench, given.joint_torque, given.wrench]
+    terms = momentum_terms(model, q, qd)
+    joint_space = [terms.momentum, terms.coriolis, terms.gravity, mass_matrix(model, q)]
+    return [getattr(kin, f) for f in fields] + [dyn.joint_torque, dyn.wrench, given.joint_torque, given.wrench,
+                                                *joint_space]  # fmt: skip
 
 
 @pytest.mark.parametrize("robot", sorted(TEST_ROBOTS))
@@ -43,7 +49,7 @@ def test_compiled_kernels_give_the_python_kernels_numbers_bit_for_bit(robot: str
          wrenches[5]),
     ]  # fmt: skip
     kernels = [kernel_of(model), dynamics_of(model), dynamics_of(model, external=True), backward_of(model),
-               backward_of(model, external=True)]  # fmt: skip
+               backward_of(model, external=True), momentum_of(model), mass_matrix_of(model)]  # fmt: skip
     monkeypatch.setenv("NEFORWARD_NATIVE", "off")  # the Python kernels first
     python = [outputs(model, *case) for case in cases]
     assert all(kernel.native.get() is None for kernel in kernels)

@@ -20,7 +20,6 @@ if TYPE_CHECKING:
     pass
 
 
-
 def add_bag_arguments(bag: argparse.ArgumentParser) -> None:
     bag.add_argument(
         "inputs",

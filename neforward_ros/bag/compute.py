@@ -21,10 +21,12 @@ from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.read import Recording
 from neforward_ros.bag.report import Segment
 from neforward_ros.computation.base_motion import BaseTracker
-from neforward_ros.computation.compute import ComputeState, compute
+from neforward_ros.computation.compute import ComputeState, compute, observe_raw
 from neforward_ros.computation.inputs import JointStates, LinkMotion
 from neforward_ros.computation.live_inputs import Inputs, LiveInputs
-from neforward_ros.computation.result import Result
+from neforward_ros.computation.observer import RawStates
+from neforward_ros.computation.raw_samples import RawAssembler
+from neforward_ros.computation.result import Observation, Result
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.coverage import covered_mask
 from neforward_ros.model import RobotModel
@@ -97,15 +99,67 @@ def prepare_inputs(recording: Recording, options: BagOptions, progress: Callable
     )
 
 
+def raw_states(recording: Recording, options: BagOptions) -> tuple[RawStates | None, np.ndarray, bool | None]:
+    """The measured joint states at the newest stamps, for the momentum observer, as the node
+    assembles them (:mod:`neforward_ros.computation.raw_samples`, each segment from its start), with
+    their recording times, and whether the joint states carry velocities (None: no stamp where
+    every joint has a sample)."""
+    model = recording.model
+    n = len(model.joint_names)
+    max_gap = round(options.settings.estimator.max_gap * NS)
+    states: list[RawStates] = []
+    times: list[int] = []
+    velocities: bool | None = None
+    for start, stop in _segments(recording):
+        q, v, e, present = _message_rows(recording, start, stop)
+        present &= np.isfinite(q)
+        assembler = RawAssembler(n, max_gap)
+        stamps = recording.stamps[start:stop].tolist()
+        log_times = recording.log_times[start:stop].tolist()
+        for m, stamp in enumerate(stamps):
+            joints = np.flatnonzero(present[m])
+            if not len(joints):
+                continue
+            found = assembler.add(stamp, joints, q[m, joints], v[m, joints], e[m, joints])
+            if velocities is None and (found is not None or assembler.missing_velocity):
+                velocities = found is not None
+            if found is not None:
+                states.append(found)
+                times.append(log_times[m])
+    if not states:
+        return None, np.zeros(0, dtype=np.int64), velocities
+    return RawStates.stack(states), np.array(times, dtype=np.int64), velocities
+
+
+def observations(
+    model: RobotModel, recording: Recording, options: BagOptions, state: ComputeState
+) -> tuple[Observation, np.ndarray] | None:
+    """The momentum observer over the recording's raw samples, in the shared computation: the
+    observation (a batch) and its recording times; None when the observer does not give the external
+    torques (``state.method`` is decided here for ``auto``)."""
+    if state.observer is None:
+        return None
+    raw, log_times, velocities = raw_states(recording, options)
+    state.decide(bool(velocities))
+    if raw is None:
+        return None
+    observation = observe_raw(model, options.settings, raw, state)
+    return None if observation is None else (observation, log_times)
+
+
 def results(
-    model: RobotModel, inputs: BagInputs, options: BagOptions, segments: list[Segment], chunk: int | None = None
+    model: RobotModel,
+    inputs: BagInputs,
+    options: BagOptions,
+    segments: list[Segment],
+    state: ComputeState,
+    chunk: int | None = None,
 ) -> Iterator[tuple[Result | None, np.ndarray, int]]:
     """(result, its recording times, the inputs done so far) of consecutive chunks of the inputs, each
     from one call of the shared computation (None: nothing published in the chunk); the segments'
     counts of stamps with output, without, and with only some links are added up as it goes."""
     chunk = CHUNK if chunk is None else chunk
     settings = options.settings
-    state = ComputeState.new(model, settings, lambda level, message: None)  # the report says what matters
     for start in range(0, len(inputs), chunk):
         part = slice(start, start + chunk)
         base = None if inputs.base is None else inputs.base.part(part)
@@ -220,14 +274,7 @@ def _replayed(
     order) through the node's live inputs: each stamp gets exactly what the node would have had."""
     model = recording.model
     n = len(model.joint_names)
-    count = stop - start
-    q, v, e = (np.full((count, n), np.nan) for _ in range(3))
-    present = np.zeros((count, n), dtype=bool)
-    for j, (rows, qs, vs, es) in recording.columns.items():
-        inside = (rows >= start) & (rows < stop)
-        at = rows[inside] - start
-        present[at, j] = True
-        q[at, j], v[at, j], e[at, j] = qs[inside], vs[inside], es[inside]
+    q, v, e, present = _message_rows(recording, start, stop)
     live = LiveInputs(model, options.settings, lambda level, message: None, keep_base=None)
     names = np.array(model.joint_names, dtype=object)
     stamps = recording.stamps[start:stop].tolist()
@@ -272,6 +319,21 @@ def _replayed(
     motions = [motion for _, motion in out]
     base = None if motions[0] is None else LinkMotion.stack(motions)
     return states, times, base, absent
+
+
+def _message_rows(recording: Recording, start: int, stop: int) -> tuple[np.ndarray, ...]:
+    """Messages [start, stop) as rows of (q, v, e) by joint column, NaN where a message has none, and
+    whether each message names each joint."""
+    n = len(recording.model.joint_names)
+    count = stop - start
+    q, v, e = (np.full((count, n), np.nan) for _ in range(3))
+    present = np.zeros((count, n), dtype=bool)
+    for j, (rows, qs, vs, es) in recording.columns.items():
+        inside = (rows >= start) & (rows < stop)
+        at = rows[inside] - start
+        present[at, j] = True
+        q[at, j], v[at, j], e[at, j] = qs[inside], vs[inside], es[inside]
+    return q, v, e, present
 
 
 def _efforts_at(t_ns: np.ndarray, efforts: np.ndarray, targets: np.ndarray) -> np.ndarray:

@@ -7,20 +7,24 @@ import shutil
 import signal
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from neforward_ros.bag.compute import prepare_inputs, results
+from neforward_ros.bag.compute import observations, prepare_inputs, results
 from neforward_ros.bag.export import CsvWriter
 from neforward_ros.bag.options import BagOptions, check_options
 from neforward_ros.bag.plot import PlotSeries, write_plot
 from neforward_ros.bag.read import read
 from neforward_ros.bag.report import BagReport, Progress
 from neforward_ros.bag.write import RecordingWriter
+from neforward_ros.computation.compute import ComputeState, observer_wanted
+from neforward_ros.computation.result import Observation, Result
 from neforward_ros.errors import InputError
 from neforward_ros.kinematics.backward_kernel import backward_of
 from neforward_ros.kinematics.forward_kernel import kernel_of
+from neforward_ros.kinematics.joint_space_kernel import momentum_of
 
 
 def process_bag(
@@ -70,6 +74,8 @@ def process_bag(
     kernel_of(model).native.get(start=True)
     if settings.dynamics_needed:
         backward_of(model).native.get(start=True)
+    if observer_wanted(settings):
+        momentum_of(model).native.get(start=True)
     for link in settings.named_links:
         if link not in model.link_index:
             raise InputError(f"link {link!r} is not in robot {model.name!r}")
@@ -105,25 +111,29 @@ def process_bag(
             measured = bool(np.isfinite(inputs.states.efforts).any())
             csv = CsvWriter(partials[-1], model, settings.publish_torques, settings.publish_torques and measured)
         series = PlotSeries(settings.gravity, settings.publish_torques) if plot_path is not None else None
-        contact_state, origin = False, report.segments[0].first_ns
-        for result, log_times, done in results(model, inputs, options, report.segments):
+        origin = report.segments[0].first_ns
+        state = ComputeState.new(model, settings, lambda level, message: None)  # the report says what matters
+        observed = observations(model, recording, options, state)
+        if observed is not None:
+            report.notes.append("external torques and contact: the momentum observer, at every joint-state stamp")
+            _contacts(report, observed[0].stamp_ns, observed[0].contact, origin)
+        written = 0  # observations written so far (interleaved with the results, in recording order)
+        for result, log_times, done in results(model, inputs, options, report.segments, state):
             progress("computing", done / len(inputs))
             if result is None:
                 continue
-            if result.contact is not None:  # the contact intervals, for the report
-                for stamp, state in zip(result.stamp_ns.tolist(), result.contact.tolist(), strict=True):
-                    if state == state and bool(state) != contact_state:  # a known state that changed
-                        contact_state = bool(state)
-                        seconds = (stamp - origin) / 1e9
-                        if contact_state:
-                            report.contacts.append((seconds, None))
-                        else:
-                            report.contacts[-1] = (report.contacts[-1][0], seconds)
+            if observed is not None and len(log_times):
+                written = recording_writer.write_observations(*observed, written, int(log_times[-1]))
+            _contacts(report, result.stamp_ns, result.contact, origin)
             recording_writer.write(result, log_times)
+            if observed is not None:
+                result = with_observed(result, log_times, *observed)
             if csv is not None:
                 csv.write(result)
             if series is not None:
                 series.add(result)
+        if observed is not None:
+            recording_writer.write_observations(*observed, written, None)
         report.samples_out = sum(segment.samples_out for segment in report.segments)
         if report.samples_out == 0:
             raise InputError(
@@ -163,6 +173,36 @@ def process_bag(
     report.topics = recording_writer.topics
     report.seconds = time.monotonic() - started
     return report
+
+
+def _contacts(report: BagReport, stamps: np.ndarray, states: np.ndarray | None, origin: int) -> None:
+    """The contact intervals, for the report: from a chunk's contact states (in order)."""
+    if states is None:
+        return
+    current = bool(report.contacts) and report.contacts[-1][1] is None
+    for stamp, state in zip(stamps.tolist(), states.tolist(), strict=True):
+        if state == state and bool(state) != current:  # a known state that changed
+            current = bool(state)
+            seconds = (stamp - origin) / 1e9
+            if current:
+                report.contacts.append((seconds, None))
+            else:
+                report.contacts[-1] = (report.contacts[-1][0], seconds)
+
+
+def with_observed(
+    result: Result, log_times: np.ndarray, observation: Observation, observed_times: np.ndarray
+) -> Result:
+    """The result with the observer's external torques at its stamps (for the CSV and the plot), where
+    the observer has a sample of the same stamp and recording time."""
+    if result.dynamics is None:
+        return result
+    at = np.minimum(np.searchsorted(observed_times, log_times), max(len(observed_times) - 1, 0))
+    if not len(observed_times):
+        return result
+    same = (observed_times[at] == log_times) & (observation.stamp_ns[at] == result.stamp_ns)
+    external = np.where(same[:, None], observation.external[at], np.nan)
+    return replace(result, dynamics=replace(result.dynamics, external=external))
 
 
 def _partial(path: Path) -> Path:

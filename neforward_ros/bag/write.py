@@ -11,9 +11,14 @@ from typing import Any
 import numpy as np
 
 from neforward_ros.bag.options import BagOptions
-from neforward_ros.computation.result import Result
+from neforward_ros.computation.result import Observation, Result
 from neforward_ros.interface import encoder
-from neforward_ros.interface.messages import dynamics_messages, per_link_messages, world_link_states
+from neforward_ros.interface.messages import (
+    dynamics_messages,
+    observation_messages,
+    per_link_messages,
+    world_link_states,
+)
 from neforward_ros.interface.names import NodeNames
 from neforward_ros.interface.topics import COM_STATES, LINK_STATES, WORLD_LINK_STATES, output_list
 from neforward_ros.model import RobotModel
@@ -33,6 +38,7 @@ def output_topics(options: BagOptions) -> list[tuple[str, str]]:
         settings.wrench_links,
         bool(settings.contact_thresholds),
         settings.world_states,
+        bool(settings.contact_link),
     )
     return [(names.resolve(o.topic), o.type) for o in outputs]
 
@@ -106,6 +112,18 @@ class RecordingWriter:
                 for topic, contents in rest:
                     connection = self.connections[names.resolve(topic)]
                     self.writer.write(connection, log_time, cdr.encode(connection.msgtype, contents))
+
+    def write_observations(self, observation: Observation, log_times: np.ndarray, start: int, until: int | None) -> int:
+        """The momentum observer's messages of samples ``start`` on, up to recording time ``until``
+        (None: to the end); returns the index of the first sample not written."""
+        stop = len(log_times) if until is None else int(np.searchsorted(log_times, until, side="right"))
+        settings, names = self.options.settings, self.names
+        times = log_times.tolist()
+        for i in range(start, stop):
+            for topic, contents in observation_messages(observation.sample(i), settings):
+                connection = self.connections[names.resolve(topic)]
+                self.writer.write(connection, times[i], cdr.encode(connection.msgtype, contents))
+        return max(stop, start)
 
     def finish(self) -> Path:
         """Close the recording; returns where it is (inside the staging folder)."""

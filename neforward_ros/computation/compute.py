@@ -1,4 +1,4 @@
-"""The node's result from its inputs: one computation for the node (a stamp at a time) and the bag
+"""The node's results from its inputs: one computation for the node (a stamp at a time) and the bag
 tool (a chunk of stamps at a time).
 
 :func:`compute` takes joint states (:class:`~neforward_ros.computation.inputs.JointStates`) and, for a
@@ -9,16 +9,23 @@ publishes and the bag tool records. In order:
 2. the root's motion: at rest under ``gravity``, or from the base source's link
    (:func:`~neforward_ros.computation.base_motion.root_and_world`), with the root's world pose;
 3. the forward recursion (:func:`~neforward_ros.kinematics.forward.kinematics_table`);
-4. with torques, wrenches or contact asked for and every joint known: the backward pass, the
-   measured efforts scaled and offset (``effort.*``), and the debounced contact state.
+4. with torques, wrenches or contact asked for and every joint known: the backward pass and, where
+   the external torques are taken as measured - model (``external_torques.method: difference``),
+   those and the debounced contact state.
 
-What runs on from one stamp to the next (the contact debounce) is in a :class:`ComputeState` the
-caller holds and passes in: the node one for its model, the bag tool one per recording, fed in stamp
-order, so the two give the same numbers for the same inputs.
+:func:`observe_raw` takes the measured joint states at the newest stamps
+(:class:`~neforward_ros.computation.observer.RawStates`) and, where the momentum observer gives the
+external torques, gives them, the contact state and the contact wrench at once, with no estimator
+lag (an :class:`~neforward_ros.computation.result.Observation`).
+
+What runs on from one stamp to the next (the observer, the contact debounce) is in a
+:class:`ComputeState` the caller holds and passes in: the node one for its model, the bag tool one
+per recording, fed in stamp order, so the two give the same numbers for the same inputs.
 """
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -27,10 +34,13 @@ import numpy as np
 from neforward_ros.computation.base_motion import root_and_world
 from neforward_ros.computation.contact import ContactDetector
 from neforward_ros.computation.inputs import JointStates, LinkMotion
+from neforward_ros.computation.observer import ObserverState, RawStates, observe
 from neforward_ros.computation.policy import apply_policy, hold_vector
-from neforward_ros.computation.result import Dynamics, Result, make_result
+from neforward_ros.computation.result import Dynamics, Observation, Result, make_result
+from neforward_ros.kinematics.effort_model import EffortModel
 from neforward_ros.kinematics.forward import kinematics_table, root_state
 from neforward_ros.kinematics.inverse_dynamics import split_values, wrenches_from_table
+from neforward_ros.kinematics.jacobian import wrench_at_link
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel
 from neforward_ros.parameters.settings import NodeSettings
@@ -38,33 +48,74 @@ from neforward_ros.parameters.settings import NodeSettings
 
 @dataclass
 class ComputeState:
-    """What :func:`compute` needs beyond its inputs, for one model and one stream of stamps.
+    """What :func:`compute` and :func:`observe_raw` need beyond their inputs, for one model and one
+    stream of stamps.
 
     Attributes:
         hold: (n,) the positions ``publish_policy: hold`` holds joints at.
-        effort_scale, effort_offset: (n,) measured = scale * effort + offset.
-        contact: the contact debounce (None without ``contact.*``), which runs on from stamp to stamp.
+        effort: the joints' effort and friction model (``effort.*``, ``friction.*``).
+        contact: the contact debounce (None without ``contact.*``), which runs on from stamp to stamp:
+            fed by whichever method gives the external torques.
+        observer: the momentum observer's state; None where it cannot run (a moving base) or is not
+            wanted (``external_torques.method: difference``, or nothing that needs external torques).
+        method: how the external torques are estimated: "observer" or "difference"; None while
+            ``auto`` has not seen every joint yet (see :meth:`decide`).
     """
 
     hold: np.ndarray
-    effort_scale: np.ndarray
-    effort_offset: np.ndarray
+    effort: EffortModel
     contact: ContactDetector | None
+    observer: ObserverState | None
+    method: str | None
+    log: ThrottledLog
 
     @classmethod
     def new(cls, model: RobotModel, settings: NodeSettings, log: LogFunction | None = None) -> ComputeState:
         """The state at the start of a stream, for this model and these settings."""
         names = model.joint_names
+        throttled = ThrottledLog(log)
         contact = None
         if settings.contact_thresholds:
             thresholds = np.array([settings.contact_thresholds.get(n, np.nan) for n in names])
-            contact = ContactDetector(thresholds, settings.contact_debounce, names, ThrottledLog(log))
-        return cls(
-            hold_vector(names, settings.hold_positions),
-            np.array([settings.effort_scale.get(n, 1.0) for n in names]),
-            np.array([settings.effort_offset.get(n, 0.0) for n in names]),
-            contact,
+            contact = ContactDetector(thresholds, settings.contact_debounce, names, throttled)
+        friction = settings.friction
+        effort = EffortModel.of(
+            names,
+            settings.effort_scale,
+            settings.effort_offset,
+            friction.get("coulomb"),
+            friction.get("viscous"),
+            friction.get("velocity_scale"),
+            friction.get("stribeck"),
+            friction.get("stribeck_velocity"),
         )
+        observer, method = None, "difference"
+        if observer_wanted(settings):
+            gains = np.array([settings.observer_gains.get(n, settings.observer_gain) for n in names])
+            observer = ObserverState(gains, settings.gravity, settings.velocity_cutoff)
+            method = "observer" if settings.external_method == "observer" else None
+        return cls(hold_vector(names, settings.hold_positions), effort, contact, observer, method, throttled)
+
+    def decide(self, velocities: bool) -> None:
+        """``auto``, once every joint has a sample: the observer when the joint states carry
+        velocities, else the difference."""
+        if self.method is not None:
+            return
+        self.method = "observer" if velocities else "difference"
+        self.log.log(
+            logging.INFO,
+            "external torques: momentum observer at the newest sample (the joint states carry velocities)"
+            if velocities
+            else "external torques: measured - model at the estimator's stamps (the joint states carry no velocities, "
+            "which the momentum observer needs)",
+        )
+
+
+def observer_wanted(settings: NodeSettings) -> bool:
+    """Whether the momentum observer may give the external torques with these settings: something
+    needs them (torques, contact), the base is fixed, and the method is not ``difference``."""
+    needed = settings.publish_torques or bool(settings.contact_thresholds) or bool(settings.contact_link)
+    return needed and settings.external_method != "difference" and settings.base_source == "fixed"
 
 
 @dataclass(frozen=True)
@@ -139,13 +190,34 @@ def compute(
         complete = known.all(axis=-1)
         if not single:
             torques = np.where(complete[:, None], torques, np.nan)  # no dynamics where a joint has no state
-        measured = state.effort_scale * efforts + state.effort_offset
-        dynamics = Dynamics(model.joint_names, q, qd, torques, measured, force, moment)
+        if state.method == "observer":
+            external = np.full_like(torques, np.nan)  # the observer's, at the newest samples
+        else:
+            external = state.effort.motor(efforts) - (torques + state.effort.friction(qd))
+        dynamics = Dynamics(model.joint_names, q, qd, torques, external, force, moment)
         contact = None
-        if state.contact is not None:
+        if state.contact is not None and state.method != "observer":
             if single:
                 contact = state.contact.update(stamps, dynamics.external)
             else:
                 contact = state.contact.update_many(stamps, dynamics.external, complete)
         result = replace(result, dynamics=dynamics, contact=contact)
     return Computed(result, rows, known_in, publish, base_unknown)
+
+
+def observe_raw(model: RobotModel, settings: NodeSettings, raw: RawStates, state: ComputeState) -> Observation | None:
+    """The momentum observer at raw samples (one or a batch, in stamp order): external torques,
+    the contact state and the contact wrench; None when the observer does not give them."""
+    if state.observer is None or state.method != "observer":
+        return None
+    external = observe(model, raw, state.effort, state.observer)
+    contact = None
+    if state.contact is not None:
+        if raw.single:
+            contact = state.contact.update(raw.stamps, external) if np.isfinite(external).any() else None
+        else:
+            contact = state.contact.update_many(raw.stamps, external, np.isfinite(external).any(axis=-1))
+    wrench = None
+    if settings.contact_link and settings.contact_link in model.link_index:
+        wrench = wrench_at_link(model, raw.q, external, settings.contact_link)
+    return Observation(raw.stamps, model.joint_names, raw.q, raw.qd, external, contact, wrench, settings.contact_link)

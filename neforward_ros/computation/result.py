@@ -23,8 +23,10 @@ class Dynamics:
         joint_names: the model's joint columns.
         positions, velocities: (..., n) the joint states it was computed from (as estimated).
         torques: (..., n) the model's joint torques, N m (N for prismatic joints).
-        measured: (..., n) the joints' measured efforts, scaled and offset (``effort.*``), at the
-            stamp; NaN where the input had none.
+        external: (..., n) measured - model, the model being ``torques`` plus friction
+            (``friction.*``): the torque the motors give beyond what the motion needs (see the
+            README for its sign); NaN where the input had no effort, and everywhere when the
+            momentum observer gives the external torques instead (:class:`Observation`).
         force, moment: (..., n_links, 3) what each link receives through its parent joint, N and N m
             about the link origin, link frame (see :class:`neforward_ros.InverseDynamics`).
     """
@@ -33,20 +35,72 @@ class Dynamics:
     positions: np.ndarray
     velocities: np.ndarray
     torques: np.ndarray
-    measured: np.ndarray
+    external: np.ndarray
     force: np.ndarray
     moment: np.ndarray
 
     def part(self, index: Any) -> Dynamics:
-        """The samples ``index`` (an int or a slice) of a batch."""
-        fields = ("positions", "velocities", "torques", "measured", "force", "moment")
-        return Dynamics(self.joint_names, *(getattr(self, name)[index] for name in fields))
+        """The samples ``index`` (an int, a slice or an index array) of a batch."""
+        return Dynamics(self.joint_names, *(getattr(self, name)[index] for name in _DYNAMICS_FIELDS))
 
-    @property
-    def external(self) -> np.ndarray:
-        """measured - model: the torque the motors give beyond what the motion needs, NaN where not
-        measured (see the README for its sign)."""
-        return self.measured - self.torques
+
+_DYNAMICS_FIELDS = ("positions", "velocities", "torques", "external", "force", "moment")
+
+
+@dataclass(frozen=True)
+class Observation:
+    """The momentum observer's output (:mod:`neforward_ros.computation.observer`) at one raw sample's
+    stamp, or (a leading sample axis) at many: what ~/external_torques, ~/contact and
+    ~/contact_wrench publish when the observer gives the external torques.
+
+    Attributes:
+        stamp_ns: int ns, or (T,) int64.
+        joint_names: the model's joint columns.
+        positions, velocities: (..., n) the measured joint states.
+        external: (..., n) N m (N), NaN where unknown (the observer's first sample, a joint without an
+            effort).
+        contact: ~/contact's state (a batch's: (T,) floats, 1 or 0, NaN where unknown); None without
+            ``contact.*``.
+        wrench: (..., 6) ~/contact_wrench's force and moment at ``link``'s origin, in its frame; None
+            without ``contact.link``.
+        link: the link of ``wrench``.
+    """
+
+    stamp_ns: Any
+    joint_names: tuple[str, ...]
+    positions: np.ndarray
+    velocities: np.ndarray
+    external: np.ndarray
+    contact: Any = None
+    wrench: np.ndarray | None = None
+    link: str = ""
+
+    def sample(self, index: int) -> Observation:
+        """One sample of a batch."""
+        contact = self.contact
+        if contact is not None:
+            contact = None if not np.isfinite(contact[index]) else bool(contact[index])
+        return replace(
+            self,
+            stamp_ns=int(self.stamp_ns[index]),
+            positions=self.positions[index],
+            velocities=self.velocities[index],
+            external=self.external[index],
+            contact=contact,
+            wrench=None if self.wrench is None else self.wrench[index],
+        )
+
+    def part(self, index: Any) -> Observation:
+        """Samples ``index`` (a slice or an index array) of a batch."""
+        return replace(
+            self,
+            stamp_ns=self.stamp_ns[index],
+            positions=self.positions[index],
+            velocities=self.velocities[index],
+            external=self.external[index],
+            contact=None if self.contact is None else self.contact[index],
+            wrench=None if self.wrench is None else self.wrench[index],
+        )
 
 
 @dataclass(frozen=True)
@@ -114,15 +168,7 @@ class Result:
                 stamp_ns=self.stamp_ns[part],
                 table=self.table[part],
                 determined=None,
-                dynamics=None
-                if self.dynamics is None
-                else Dynamics(
-                    self.dynamics.joint_names,
-                    *(
-                        getattr(self.dynamics, f)[part]
-                        for f in ("positions", "velocities", "torques", "measured", "force", "moment")
-                    ),
-                ),
+                dynamics=None if self.dynamics is None else self.dynamics.part(part),
                 contact=None if self.contact is None else self.contact[part],
                 world=None if self.world is None else (self.world[0][part], self.world[1][part]),
             )

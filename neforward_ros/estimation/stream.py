@@ -33,7 +33,7 @@ from neforward_ros.estimation.timeline import RESTART, Timeline
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.stamps import NS
 
-__all__ = ["JointEstimate", "StreamSettings", "StreamingEstimator"]
+__all__ = ["RESTART", "JointEstimate", "StreamSettings", "StreamingEstimator"]
 
 
 class StreamingEstimator:
@@ -94,6 +94,9 @@ class StreamingEstimator:
         self._clock: int | None = None
         self._origin = 0
         self.segment = 0
+        self.accepted: list[tuple[int, list[Sample]] | str] = []
+        """The messages the last :meth:`update` used, in order: (stamp, samples), and :data:`RESTART`
+        where the stream restarted (the momentum observer's raw samples)."""
 
     # -- input ------------------------------------------------------------------------------
 
@@ -115,6 +118,7 @@ class StreamingEstimator:
                 be empty).
             receive_ns: receive time, used when stamp_ns is 0.
         """
+        self.accepted = []
         try:
             return self._update(int(stamp_ns), names, positions, velocities, efforts, receive_ns)
         except Exception as exc:
@@ -174,6 +178,7 @@ class StreamingEstimator:
             return []
         out: list[JointEstimate] = []
         for step in self._timeline.offer(used, [j for j, _, _, _ in samples], samples):
+            self.accepted.append(step)
             if step is RESTART:
                 out.extend(self.flush())
                 self.reset(keep_timeline=True)

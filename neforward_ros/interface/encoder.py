@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-from neforward_ros.computation.result import Result
+from neforward_ros.computation.result import Observation, Result
 from neforward_ros.interface.messages import (
     com_states,
     dynamics_messages,
     link_states,
     markers,
+    observation_messages,
     per_link_messages,
     world_link_states,
 )
@@ -63,11 +64,14 @@ class Encoder:
         self._types = {output.topic: output.type for output in output_list(
             settings.accel_links, settings.imu_links, settings.publish_markers, settings.publish_torques,
             settings.wrench_links, bool(settings.contact_thresholds), bool(settings.world_frame),
+            bool(settings.contact_link),
         )}  # fmt: skip
         self.templates = Templates(settings.frame_prefix)
 
-    def encode(self, result: Result) -> list[tuple[str, bytes]]:
+    def encode(self, result: Result | Observation) -> list[tuple[str, bytes]]:
         settings = self.settings
+        if isinstance(result, Observation):
+            return [(t, cdr.encode(self._types[t], c)) for t, c in observation_messages(result, settings)]
         link_template, com_template = self.templates(result)
         stamp = result.stamp_ns
         link_blocks, com_blocks = result.blocks

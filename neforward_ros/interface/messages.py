@@ -18,6 +18,10 @@ Frames and points (see the README topic table):
   effort minus them, with the joint states they come from.
 - <link>/wrench: what the link receives through its parent joint, link frame, about its origin.
 - contact (std_msgs/Bool): the debounced contact state.
+- contact_wrench (geometry_msgs/WrenchStamped): the wrench at ``contact.link``'s origin, in its frame,
+  that the external torques show.
+External torques, contact and contact wrench come either with a result (measured - model at the
+estimator's stamps) or with an observation (the momentum observer at the newest samples).
 Linear accelerations are classical (not spatial) accelerations minus gravity: the specific force an
 accelerometer reads; with gravity set to zero they are kinematic accelerations.
 """
@@ -29,10 +33,11 @@ from typing import Any
 
 import numpy as np
 
-from neforward_ros.computation.result import Blocks, Result
+from neforward_ros.computation.result import Blocks, Observation, Result
 from neforward_ros.interface.topics import (
     COM_STATES,
     CONTACT,
+    CONTACT_WRENCH,
     EXTERNAL_TORQUES,
     JOINT_TORQUES,
     LINK_STATES,
@@ -239,21 +244,23 @@ def joint_torques(result: Result) -> Message:
     }
 
 
-def external_torques(result: Result) -> Message | None:
+def external_torques(result: Result | Observation) -> Message | None:
     """sensor_msgs/JointState of the joints whose input carried an effort: ``effort`` = measured
-    (scaled, offset) - model, positive where the motor gives more than the motion needs, as it does
-    holding an unmodelled payload up; None when no joint has a measured effort."""
-    dynamics = result.dynamics
-    assert dynamics is not None
-    external = dynamics.external
+    (scaled, offset) - model (with friction), positive where the motor gives more than the motion
+    needs, as it does holding an unmodelled payload up; None when no joint has one. From a result
+    (the difference, at the estimator's stamp) or an observation (the momentum observer's)."""
+    source = result.dynamics if isinstance(result, Result) else result
+    if source is None:
+        return None
+    external = source.external
     keep = np.flatnonzero(np.isfinite(external))
     if len(keep) == 0:
         return None
     return {
         "header": header(result.stamp_ns, ""),
-        "name": [dynamics.joint_names[k] for k in keep],
-        "position": dynamics.positions[keep].tolist(),
-        "velocity": dynamics.velocities[keep].tolist(),
+        "name": [source.joint_names[k] for k in keep],
+        "position": source.positions[keep].tolist(),
+        "velocity": source.velocities[keep].tolist(),
         "effort": external[keep].tolist(),
     }
 
@@ -320,3 +327,31 @@ def all_messages(result: Result, settings: NodeSettings) -> list[tuple[str, Mess
     if settings.publish_markers:
         out.append((MARKERS, markers(result, prefix, settings.marker_scale)))
     return out + dynamics_messages(result, settings.publish_torques, settings.wrench_links, prefix)
+
+
+def contact_wrench(observation: Observation, frame_prefix: str = "") -> Message | None:
+    """geometry_msgs/WrenchStamped: the wrench at the contact link's origin, in its frame (force N,
+    torque N m), whose J^T is closest to the external torques: what the robot exerts on what it
+    touches there (the push it receives, negated); None where the torques are unknown."""
+    wrench = observation.wrench
+    if wrench is None or not np.isfinite(wrench).all():
+        return None
+    return {
+        "header": header(observation.stamp_ns, frame_prefix + observation.link),
+        "wrench": {"force": vector3(wrench[0:3]), "torque": vector3(wrench[3:6])},
+    }
+
+
+def observation_messages(observation: Observation, settings: NodeSettings) -> list[tuple[str, Message]]:
+    """(topic, contents) of the outputs of one observation, in :func:`output_list` order."""
+    out: list[tuple[str, Message]] = []
+    if settings.publish_torques:
+        external = external_torques(observation)
+        if external is not None:
+            out.append((EXTERNAL_TORQUES, external))
+    if observation.contact is not None:
+        out.append((CONTACT, {"data": observation.contact}))
+    wrench = contact_wrench(observation, settings.frame_prefix)
+    if wrench is not None:
+        out.append((CONTACT_WRENCH, wrench))
+    return out

@@ -14,6 +14,7 @@ MARKERS = "~/markers"
 JOINT_TORQUES = "~/joint_torques"
 EXTERNAL_TORQUES = "~/external_torques"
 CONTACT = "~/contact"
+CONTACT_WRENCH = "~/contact_wrench"
 WORLD_LINK_STATES = "~/world_link_states"
 
 
@@ -47,9 +48,10 @@ def output_list(
     wrench_links: Sequence[str] = (),
     contact: bool = False,
     world: bool = False,
+    contact_wrench: bool = False,
 ) -> list[Output]:
     """The node's outputs, relative names: link_states, com_states, world_link_states, per-link topics,
-    markers, joint torques, external torques, per-link wrenches, contact."""
+    markers, joint torques, external torques, per-link wrenches, contact, contact wrench."""
     out = [Output(LINK_STATES, LINK_STATES_TYPE), Output(COM_STATES, LINK_STATES_TYPE)]
     if world:
         out.append(Output(WORLD_LINK_STATES, LINK_STATES_TYPE))
@@ -63,6 +65,8 @@ def output_list(
     out += [Output(wrench_topic(link), WRENCH_TYPE) for link in wrench_links]
     if contact:
         out.append(Output(CONTACT, BOOL_TYPE))
+    if contact_wrench:
+        out.append(Output(CONTACT_WRENCH, WRENCH_TYPE))
     return out
 
 

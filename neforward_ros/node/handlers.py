@@ -14,7 +14,7 @@ import struct
 from collections.abc import Callable
 
 from neforward_ros.computation.base_motion import base_message
-from neforward_ros.computation.result import Result
+from neforward_ros.computation.result import Observation, Result
 from neforward_ros.interface import topics
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.node.pipeline import Pipeline, TrajectoryPoint
@@ -36,7 +36,8 @@ class MessageHandlers:
 
     Attributes:
         messages_in: input messages handled (joint states or trajectories).
-        results_out: results published (one per output stamp).
+        results_out: results published (one per output stamp of the estimator; the momentum
+            observer's observations are not counted).
     """
 
     def __init__(self, pipeline: Pipeline, publish: Publish, log: LogFunction | None = None) -> None:
@@ -98,7 +99,7 @@ class MessageHandlers:
         except Exception as exc:
             self._dropped("robot description", exc)
 
-    def _publish_results(self, results: list[Result], what: str) -> None:
+    def _publish_results(self, results: list[Result | Observation], what: str) -> None:
         for result in results:
             try:
                 payloads = self.pipeline.encode(result)
@@ -112,7 +113,8 @@ class MessageHandlers:
                     self._log.every(
                         ("publish", topic), logging.ERROR, f"publishing on {topic} failed: {type(exc).__name__}: {exc}"
                     )
-            self.results_out += 1
+            if isinstance(result, Result):
+                self.results_out += 1
 
     def _dropped(self, what: str, exc: Exception, why: str = "") -> None:
         detail = f"{why}: " if why else ""

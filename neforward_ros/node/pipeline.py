@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 
 from neforward_ros.computation.base_motion import BaseMessage
-from neforward_ros.computation.compute import Computed, ComputeState, compute
+from neforward_ros.computation.compute import Computed, ComputeState, compute, observe_raw, observer_wanted
 from neforward_ros.computation.inputs import JointStates, LinkMotion
 from neforward_ros.computation.live_inputs import Inputs, LiveInputs
-from neforward_ros.computation.result import Result
+from neforward_ros.computation.result import Observation, Result
 from neforward_ros.errors import ModelError
 from neforward_ros.estimation.joint_messages import JointMessageReader
 from neforward_ros.interface import encoder, messages
@@ -30,6 +30,7 @@ from neforward_ros.interface.names import is_token
 from neforward_ros.interface.topics import ROBOT_DESCRIPTION, Output, output_list
 from neforward_ros.kinematics.backward_kernel import backward_of
 from neforward_ros.kinematics.forward_kernel import kernel_of
+from neforward_ros.kinematics.joint_space_kernel import momentum_of
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel, load_model
 from neforward_ros.parameters.settings import NodeSettings
@@ -102,7 +103,7 @@ class Pipeline:
         if missing:
             self._log.log(
                 logging.ERROR,
-                f"accel_links/imu_links/wrench_links name links that robot {model.name!r} does not have: "
+                f"accel_links/imu_links/wrench_links/contact.link name links that robot {model.name!r} does not have: "
                 f"{', '.join(missing)}; nothing is published for them",
             )
         for parameter, names in settings.named_joints:
@@ -129,9 +130,11 @@ class Pipeline:
         kernel_of(model).native.get(start=True)
         if settings.dynamics_needed:
             backward_of(model).native.get(start=True)
+        if observer_wanted(settings):
+            momentum_of(model).native.get(start=True)
         self.model = model
         self._supplied_names = JointMessageReader(model.joint_names, model.mimic_joint_names, self._log)
-        self._inputs = LiveInputs(model, settings, self._log_function)
+        self._inputs = LiveInputs(model, settings, self._log_function, raw=observer_wanted(settings))
         self._state = ComputeState.new(model, settings, self._log_function)
         self._log.log(
             logging.INFO,
@@ -167,14 +170,17 @@ class Pipeline:
             known(settings.wrench_links),
             bool(settings.contact_thresholds),
             settings.world_states,
+            bool(settings.contact_link),
         )
 
-    def messages(self, result: Result) -> list[tuple[str, dict[str, Any]]]:
-        """(topic, message contents) for every output of one result."""
+    def messages(self, result: Result | Observation) -> list[tuple[str, dict[str, Any]]]:
+        """(topic, message contents) for every output of one result or observation."""
+        if isinstance(result, Observation):
+            return messages.observation_messages(result, self.settings)
         return messages.all_messages(result, self.settings)
 
-    def encode(self, result: Result) -> list[tuple[str, bytes]]:
-        """(topic, CDR bytes) for every output of one result: what the runtimes publish."""
+    def encode(self, result: Result | Observation) -> list[tuple[str, bytes]]:
+        """(topic, CDR bytes) for every output of one result or observation: what the runtimes publish."""
         if self._encoder is None or self._encoder.settings is not self.settings:
             self._encoder = encoder.Encoder(self.settings)
         return self._encoder.encode(result)
@@ -190,8 +196,10 @@ class Pipeline:
         efforts: Sequence[float] = (),
         *,
         receive_ns: int | None = None,
-    ) -> list[Result]:
-        """A sensor_msgs/JointState's fields; returns the results it completes (see the estimator's modes)."""
+    ) -> list[Result | Observation]:
+        """A sensor_msgs/JointState's fields; returns what it completes: the momentum observer's
+        observation at its stamp (when the observer gives the external torques), then the results
+        the estimator releases (see its modes)."""
         if self._inputs is None:
             self._log.every("no-model", logging.WARNING, "joint states dropped: no robot model yet")
             return []
@@ -200,7 +208,25 @@ class Pipeline:
         except Exception as exc:
             self._log.every("internal", logging.ERROR, f"joint state dropped: {type(exc).__name__}: {exc}")
             return []
-        return self._results(inputs)
+        return [*self._observations(), *self._results(inputs)]
+
+    def _observations(self) -> list[Observation]:
+        """The momentum observer at the newest samples (published before the estimator's lagged results)."""
+        live, state, model = self._inputs, self._state, self.model
+        assert live is not None and state is not None and model is not None
+        raw = live.take_raw()
+        if live.velocities is not None:
+            state.decide(live.velocities)
+        out = []
+        for states in raw:
+            try:
+                observation = observe_raw(model, self.settings, states, state)
+            except Exception as exc:
+                self._log.every("internal", logging.ERROR, f"external torques dropped: {type(exc).__name__}: {exc}")
+                continue
+            if observation is not None:
+                out.append(observation)
+        return out
 
     def on_base(self, message: BaseMessage) -> list[Result]:
         """A base sensor_msgs/Imu or nav_msgs/Odometry (``base.source``); returns the results of the

@@ -10,12 +10,16 @@ from typing import Any
 from neforward_ros.errors import InputError
 from neforward_ros.estimation.motion import KalmanSettings
 from neforward_ros.estimation.settings import METHODS, MODES, VELOCITY_SOURCES, StreamSettings
+from neforward_ros.kinematics.effort_model import DEFAULT_STRIBECK_VELOCITY, DEFAULT_VELOCITY_SCALE
 from neforward_ros.kinematics.forward import DEFAULT_GRAVITY
 from neforward_ros.parameters.qos_overrides import QOS_OVERRIDES, QosOverride, qos_overrides
 from neforward_ros.parameters.table import (
     ACCELERATION_SOURCES,
     BASE_SOURCES,
+    DEFAULT_OBSERVER_GAIN,
+    DEFAULT_VELOCITY_CUTOFF,
     DEFAULTS,
+    EXTERNAL_METHODS,
     PARAMETERS,
     PUBLISH_POLICIES,
     ROS_OWN_PARAMETERS,
@@ -37,9 +41,16 @@ class NodeSettings:
         hold_positions: joint name -> position held under the "hold" policy (others: 0).
         publish_torques: whether ~/joint_torques and ~/external_torques are published.
         effort_scale, effort_offset: joint name -> measured = scale * effort + offset (others 1, 0).
+        friction: ``friction.*`` by field (coulomb, viscous, velocity_scale, stribeck,
+            stribeck_velocity) -> joint name -> value (see
+            :class:`neforward_ros.kinematics.effort_model.EffortModel`).
+        external_method: "auto", "observer" or "difference".
+        observer_gain: 1/s; observer_gains: joint name -> its own gain.
+        velocity_cutoff: Hz, the observer's velocity low-pass (0: none).
         wrench_links: links with ~/<link>/wrench.
         contact_thresholds: joint name -> |external torque| threshold; empty: no ~/contact.
         contact_debounce: s.
+        contact_link: the link of ~/contact_wrench, or "" for none.
         base_source: "fixed", "imu" or "odometry".
         base_topic: its topic (relative name).
         base_link: the link it measures, or "" for the message's frame id.
@@ -63,9 +74,15 @@ class NodeSettings:
     publish_torques: bool = False
     effort_scale: Mapping[str, float] = field(default_factory=dict)
     effort_offset: Mapping[str, float] = field(default_factory=dict)
+    friction: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
+    external_method: str = "auto"
+    observer_gain: float = DEFAULT_OBSERVER_GAIN
+    observer_gains: Mapping[str, float] = field(default_factory=dict)
+    velocity_cutoff: float = DEFAULT_VELOCITY_CUTOFF
     wrench_links: tuple[str, ...] = ()
     contact_thresholds: Mapping[str, float] = field(default_factory=dict)
     contact_debounce: float = 0.02
+    contact_link: str = ""
     base_source: str = "fixed"
     base_topic: str = ""
     base_link: str = ""
@@ -91,8 +108,10 @@ class NodeSettings:
 
     @property
     def named_links(self) -> tuple[str, ...]:
-        """The links that accel_links, imu_links and wrench_links name (each must be the model's)."""
-        return (*self.accel_links, *self.imu_links, *self.wrench_links)
+        """The links that accel_links, imu_links, wrench_links and contact.link name (each must be the
+        model's)."""
+        contact = (self.contact_link,) if self.contact_link else ()
+        return (*self.accel_links, *self.imu_links, *self.wrench_links, *contact)
 
     @property
     def named_joints(self) -> tuple[tuple[str, Mapping[str, float]], ...]:
@@ -102,6 +121,8 @@ class NodeSettings:
             ("hold.joint_names", self.hold_positions),
             ("effort.joint_names", self.effort_scale),
             ("contact.joint_names", self.contact_thresholds),
+            ("friction.joint_names", self.friction.get("coulomb", {})),
+            ("external_torques.joint_names", self.observer_gains),
         )
 
     def qos_override(self, topic: str, entity: str) -> QosOverride:
@@ -137,6 +158,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         ("publish_policy", PUBLISH_POLICIES),
         ("base.source", BASE_SOURCES),
         ("estimator.method", METHODS),
+        ("external_torques.method", EXTERNAL_METHODS),
     ):
         if merged[name] not in choices:
             raise InputError(f"parameter {name} must be one of {', '.join(choices)}, got {merged[name]!r}")
@@ -150,6 +172,27 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
     effort_scale = _per_joint(merged, "effort.joint_names", "effort.scale", default=1.0)
     effort_offset = _per_joint(merged, "effort.joint_names", "effort.offset", default=0.0)
     contact_thresholds = _per_joint(merged, "contact.joint_names", "contact.thresholds")
+    friction = {
+        field_name: _per_joint(merged, "friction.joint_names", f"friction.{field_name}", default=default)
+        for field_name, default in (
+            ("coulomb", None),
+            ("viscous", 0.0),
+            ("velocity_scale", DEFAULT_VELOCITY_SCALE),
+            ("stribeck", 0.0),
+            ("stribeck_velocity", DEFAULT_STRIBECK_VELOCITY),
+        )
+    }
+    for field_name in ("coulomb", "viscous", "stribeck"):
+        if any(v < 0.0 for v in friction[field_name].values()):
+            raise InputError(f"parameter friction.{field_name} must hold numbers >= 0")
+    for field_name in ("velocity_scale", "stribeck_velocity"):
+        if any(not v > 0.0 for v in friction[field_name].values()):
+            raise InputError(f"parameter friction.{field_name} must hold positive numbers")
+    observer_gains = _per_joint(merged, "external_torques.joint_names", "external_torques.gains")
+    if not merged["external_torques.gain"] > 0.0 or any(not v > 0.0 for v in observer_gains.values()):
+        raise InputError("parameters external_torques.gain and external_torques.gains must be positive (1/s)")
+    if not merged["external_torques.velocity_cutoff"] >= 0.0:
+        raise InputError("parameter external_torques.velocity_cutoff must be at least 0 Hz")
     if any(not v > 0.0 for v in contact_thresholds.values()):
         raise InputError("parameter contact.thresholds must hold positive numbers")
     if not merged["base.max_delay"] > 0.0:
@@ -189,9 +232,15 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         publish_torques=merged["publish_torques"],
         effort_scale=effort_scale,
         effort_offset=effort_offset,
+        friction=friction,
+        external_method=merged["external_torques.method"],
+        observer_gain=merged["external_torques.gain"],
+        observer_gains=observer_gains,
+        velocity_cutoff=merged["external_torques.velocity_cutoff"],
         wrench_links=tuple(merged["wrench_links"]),
         contact_thresholds=contact_thresholds,
         contact_debounce=merged["contact.debounce"],
+        contact_link=merged["contact.link"],
         base_source=merged["base.source"],
         base_topic=merged["base.topic"] or {"imu": "imu", "odometry": "odom"}.get(merged["base.source"], ""),
         base_link=merged["base.link"],

@@ -15,12 +15,18 @@ from typing import Any
 from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW
 from neforward_ros.estimation.motion import KalmanSettings
 from neforward_ros.estimation.settings import DEFAULT_KALMAN_LAG, DEFAULT_MAX_GAP
+from neforward_ros.kinematics.effort_model import DEFAULT_STRIBECK_VELOCITY, DEFAULT_VELOCITY_SCALE
 from neforward_ros.kinematics.forward import DEFAULT_GRAVITY
 
 PUBLISH_POLICIES = ("partial", "wait", "hold")
 BASE_SOURCES = ("fixed", "imu", "odometry")
 NODE_NAME = "neforward"
 ACCELERATION_SOURCES = ("estimate", "supplied")
+EXTERNAL_METHODS = ("auto", "observer", "difference")
+DEFAULT_OBSERVER_GAIN = 250.0
+"""1/s: the momentum observer's gain (see the README's contact section for how it was chosen)."""
+DEFAULT_VELOCITY_CUTOFF = 16.0
+"""Hz: the momentum observer's velocity low-pass (see the README's contact section)."""
 _KALMAN = KalmanSettings()
 
 
@@ -136,11 +142,64 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("effort.joint_names", "string[]", [], "Joints whose efforts are scaled and offset before use."),
     Parameter("effort.scale", "double[]", [], "Their scales (measured = scale * effort + offset), in that order."),
     Parameter("effort.offset", "double[]", [], "Their offsets, N m (N), in that order."),
+    Parameter(
+        "friction.joint_names",
+        "string[]",
+        [],
+        "Joints with friction in the model torque: (coulomb + stribeck exp(-(v/stribeck_velocity)^2)) "
+        "tanh(v/velocity_scale) + viscous v, v the joint velocity.",
+    ),
+    Parameter("friction.coulomb", "double[]", [], "Their Coulomb friction, N m (N), in that order."),
+    Parameter("friction.viscous", "double[]", [], "Their viscous friction, N m s/rad (N s/m); empty: 0."),
+    Parameter(
+        "friction.velocity_scale",
+        "double[]",
+        [],
+        f"Their smooth sign's velocity scale, rad/s (m/s); empty: {DEFAULT_VELOCITY_SCALE} each.",
+    ),
+    Parameter("friction.stribeck", "double[]", [], "Their static friction beyond Coulomb, N m (N); empty: 0."),
+    Parameter(
+        "friction.stribeck_velocity",
+        "double[]",
+        [],
+        f"Their Stribeck velocity, rad/s (m/s); empty: {DEFAULT_STRIBECK_VELOCITY} each.",
+    ),
+    Parameter(
+        "external_torques.method",
+        "string",
+        "auto",
+        "How ~/external_torques and ~/contact are estimated: observer (a generalized-momentum observer at the "
+        "newest sample, from positions, velocities and efforts), difference (measured - model at the estimator's "
+        "stamps, with its accelerations), or auto (observer when the joint states carry velocities and efforts "
+        "and the base is fixed).",
+    ),
+    Parameter(
+        "external_torques.gain",
+        "double",
+        DEFAULT_OBSERVER_GAIN,
+        "observer: its gain, 1/s (its time constant is 1/gain).",
+    ),
+    Parameter(
+        "external_torques.velocity_cutoff",
+        "double",
+        DEFAULT_VELOCITY_CUTOFF,
+        "observer: Hz, the first-order low-pass of the velocities its momentum is computed from (the torques "
+        "are not filtered); 0: none.",
+    ),
+    Parameter("external_torques.joint_names", "string[]", [], "observer: joints with a gain of their own."),
+    Parameter("external_torques.gains", "double[]", [], "observer: their gains, 1/s, in that order."),
     Parameter("wrench_links", "string[]", [], "Links that get ~/<link>/wrench: what their parent joint transmits."),
     Parameter("contact.joint_names", "string[]", [], "Joints watched for contact: ~/contact (std_msgs/Bool)."),
     Parameter("contact.thresholds", "double[]", [], "|external torque| above which each is in contact, N m (N)."),
     Parameter(
         "contact.debounce", "double", 0.02, "s a change (contact or none) must last before ~/contact follows it."
+    ),
+    Parameter(
+        "contact.link",
+        "string",
+        "",
+        "A link that gets ~/contact_wrench (geometry_msgs/WrenchStamped): the wrench at its origin, in its frame, "
+        "that the external torques show, by least squares through its Jacobian. Empty: none.",
     ),
     Parameter(
         "base.source",

@@ -1,0 +1,263 @@
+"""``neforward calibrate``: recordings of free motion in, the effort and friction model and contact
+thresholds out, as a params file the node and the bag tool take as it is.
+
+1. Each recording is read as the bag tool reads it (:mod:`neforward_ros.bag.read`: the model from
+   its ``robot_description`` or ``--urdf``, the node's rules for stray messages), and its measured
+   joint states are assembled as the node assembles them for the momentum observer
+   (:func:`neforward_ros.bag.compute.raw_states`). A recording without velocities takes the
+   whole-recording estimator's.
+2. Each joint's effort scale and offset and its friction are fitted by least squares on the
+   momentum equation, with no acceleration (:mod:`.fit`).
+3. The external torques the node would then publish on that free motion (the shared computation,
+   with the fitted parameters) give each joint's contact threshold: 1.5 times the largest of them
+   in absolute value (at least :data:`THRESHOLD_FLOOR`), so that the motion calibrated on raises no
+   contact, with a margin for what it did not show. The contact debounce is the observer's time
+   constant, 1 / gain (at least a millisecond): its output is already filtered, and a longer
+   debounce only delays the contact. Unless given, the observer's velocity cutoff is chosen among
+   :data:`CUTOFFS` on the free motion: the highest (the least lag) whose external torques have a
+   mean square within :data:`CUTOFF_SLACK` of the least, velocity noise against the lag of the
+   momentum's rate measured on the robot itself.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from neforward_ros.bag.compute import prepare_inputs, raw_states, results
+from neforward_ros.bag.options import BagOptions
+from neforward_ros.bag.read import Recording, read
+from neforward_ros.calibration.fit import JointFit, fit_joints, windows
+from neforward_ros.computation.compute import ComputeState, observe_raw
+from neforward_ros.computation.observer import RawStates
+from neforward_ros.errors import InputError
+from neforward_ros.kinematics.joint_space import momentum_values
+from neforward_ros.parameters.settings import node_settings
+
+THRESHOLD_MARGIN = 1.5
+"""Contact thresholds: this many times the largest external torque in the free motion."""
+THRESHOLD_FLOOR = 0.05
+"""N m (N): the least contact threshold."""
+CUTOFFS = (0.0, 2.0, 4.0, 8.0, 16.0, 32.0)
+"""Hz: the observer's velocity cutoffs tried (0: no filter)."""
+CUTOFF_SLACK = 1.2
+"""The velocity cutoff taken: the highest whose free-motion mean square is within this factor of the least."""
+
+
+@dataclass
+class Calibration:
+    """What ``neforward calibrate`` found.
+
+    Attributes:
+        joint_names: the model's joint columns.
+        fits: each joint's fitted parameters and residuals.
+        parameters: the node parameters to write (the given ones, with the fitted ones over them).
+        before, after: each joint's external torque RMS in the free motion with the given parameters
+            and with the fitted ones, N m (N).
+        thresholds: each joint's contact threshold.
+        method: how the node will estimate the external torques (observer or difference).
+        samples: joint states fitted on.
+        notes: what could not be fitted, and why.
+    """
+
+    joint_names: tuple[str, ...]
+    fits: list[JointFit]
+    parameters: dict[str, Any]
+    before: np.ndarray
+    after: np.ndarray
+    thresholds: np.ndarray
+    method: str
+    samples: int
+    notes: list[str] = field(default_factory=list)
+
+
+def calibrate(
+    inputs: Sequence[Path],
+    values: Mapping[str, Any],
+    *,
+    urdf: str | None = None,
+    joint_states_topic: str | None = None,
+    stribeck: bool = False,
+    progress: Callable[[str, float], None] = lambda what, fraction: None,
+) -> Calibration:
+    """Fit on the recordings (see the module docstring); ``values``: node parameters given (a params
+    file, ``-p``), kept in the output and used as the prior of what the motion cannot tell.
+
+    Raises:
+        InputError: an unreadable recording, recordings of different robots, no joint state with
+            every joint's position and effort.
+    """
+    options = BagOptions.from_parameters(values, urdf=urdf, joint_states_topic=joint_states_topic)
+    recordings: list[Recording] = []
+    for k, path in enumerate(inputs):
+        progress(f"reading {k + 1}/{len(inputs)}", 0.0)
+        recording = read(Path(path), options, progress)
+        if recordings and recording.model.joint_names != recordings[0].model.joint_names:
+            raise InputError(
+                f"{path} is of robot {recording.model.name!r} with joints {list(recording.model.joint_names)}, "
+                f"not those of {inputs[0]}"
+            )
+        recordings.append(recording)
+    model = recordings[0].model
+    names = model.joint_names
+    prior_settings = options.settings
+    prior = ComputeState.new(model, prior_settings).effort
+    gravity_force = -np.asarray(prior_settings.gravity, dtype=float)
+    parts = []
+    raws: list[tuple[RawStates | None, bool | None]] = []
+    for k, recording in enumerate(recordings):
+        progress("preparing", k / len(recordings))
+        assembled, _, velocities = raw_states(recording, options)
+        raws.append((assembled, velocities))
+        raw = _measured(recording, options, assembled, velocities)
+        if raw is None:
+            continue
+        known = np.isfinite(raw.efforts).all(axis=1)
+        values_k = momentum_values(model, raw.q, raw.qd, gravity_force)
+        n = len(names)
+        parts.append((raw, values_k[:, :n], values_k[:, 2 * n :] - values_k[:, n : 2 * n], known))
+    progress("preparing", 1.0)
+    if not parts:
+        raise InputError("no joint state with every joint's position and effort: nothing to calibrate on")
+    stamps, momentum, rest, efforts, qd, runs, offset = [], [], [], [], [], [], 0
+    for raw, p, r, known in parts:
+        edges = [0, *np.flatnonzero(raw.restart[1:] | ~known[1:] | ~known[:-1]) + 1, len(raw)]
+        runs += [(offset + a, offset + b) for a, b in itertools.pairwise(edges) if known[a]]
+        stamps.append(raw.stamps)
+        momentum.append(p)
+        rest.append(r)
+        efforts.append(raw.efforts)
+        qd.append(raw.qd)
+        offset += len(raw)
+    progress("fitting", 0.0)
+    data = windows(
+        np.concatenate(stamps), np.concatenate(momentum), np.concatenate(rest), np.concatenate(efforts),
+        np.concatenate(qd), runs,
+    )  # fmt: skip
+    fits = fit_joints(data, names, prior, stribeck=stribeck)
+    progress("fitting", 1.0)
+    fitted = dict(values)
+    fitted.update(_fitted_parameters(names, fits, stribeck))
+    fitted["publish_torques"] = True
+    fitted.pop("contact.joint_names", None)
+    fitted.pop("contact.thresholds", None)
+    progress("thresholds", 0.0)
+    given = {**values, "publish_torques": True}
+    before, _ = _external(recordings, _options(given, urdf, joint_states_topic), raws)
+    after, method = _external(recordings, _options(fitted, urdf, joint_states_topic), raws)
+    if method == "observer" and "external_torques.velocity_cutoff" not in values:
+        # The velocity cutoff for this robot and motion: velocity noise against the lag of the
+        # momentum's rate. The highest cutoff (the least lag) whose external torques in this motion
+        # have a mean square within CUTOFF_SLACK of the least.
+        trials = {}
+        for cutoff in CUTOFFS:
+            trial = {**fitted, "external_torques.velocity_cutoff": cutoff}
+            external, _ = _external(recordings, _options(trial, urdf, joint_states_topic), raws)
+            power = float(np.nanmean(np.square(external))) if len(external) else np.inf
+            trials[cutoff] = (power, external)
+        least = min(power for power, _ in trials.values())
+        cutoff = max((c for c, (power, _) in trials.items() if c > 0 and power <= CUTOFF_SLACK * least), default=0.0)
+        if trials[0.0][0] <= least:
+            cutoff = 0.0
+        fitted["external_torques.velocity_cutoff"] = cutoff
+        after = trials[cutoff][1]
+    fitted_options = _options(fitted, urdf, joint_states_topic)
+    progress("thresholds", 1.0)
+    largest = np.nanmax(np.abs(after), axis=0) if len(after) else np.full(len(names), np.nan)
+    thresholds = np.maximum(THRESHOLD_MARGIN * np.nan_to_num(largest, nan=0.0), THRESHOLD_FLOOR)
+    fitted["contact.joint_names"] = list(names)
+    fitted["contact.thresholds"] = [float(f"{x:.4g}") for x in thresholds]
+    if method == "observer":
+        gains = np.array([fitted_options.settings.observer_gains.get(n, fitted_options.settings.observer_gain)
+                          for n in names])  # fmt: skip
+        fitted["contact.debounce"] = max(0.001, float(np.ceil(1000.0 / float(np.min(gains)))) / 1000.0)
+    node_settings(fitted)  # what is written is what the node accepts
+    notes = [note for fit in fits for note in fit.notes]
+    return Calibration(
+        names,
+        fits,
+        fitted,
+        _rms(before),
+        _rms(after),
+        thresholds,
+        method,
+        sum(len(p[0]) for p in parts),
+        notes,
+    )
+
+
+def _options(values: Mapping[str, Any], urdf: str | None, topic: str | None) -> BagOptions:
+    return BagOptions.from_parameters(values, urdf=urdf, joint_states_topic=topic)
+
+
+def _measured(
+    recording: Recording, options: BagOptions, raw: RawStates | None, velocities: bool | None
+) -> RawStates | None:
+    """The measured joint states at every stamp where each joint has a sample (the node's assembly,
+    ``raw``); velocities from the whole-recording estimator where the recording has none."""
+    if raw is not None and velocities:
+        return raw
+    inputs = prepare_inputs(recording, options, lambda what, fraction: None)
+    states = inputs.states
+    ready = states.ready.all(axis=1)
+    if not ready.any():
+        return None
+    rows = np.flatnonzero(ready)
+    restart = np.r_[True, (np.diff(rows) > 1) | (np.diff(inputs.segment[rows]) != 0)]
+    return RawStates(states.stamps[rows], states.q[rows], states.qd[rows], states.efforts[rows], restart)
+
+
+def _external(
+    recordings: list[Recording], options: BagOptions, raws: list[tuple[Any, bool | None]]
+) -> tuple[np.ndarray, str]:
+    """The external torques the node publishes on the recordings with these options, stacked, and the
+    method that gives them; ``raws``: each recording's :func:`raw_states` (states, velocities)."""
+    out = []
+    method = "difference"
+    for recording, (raw, velocities) in zip(recordings, raws, strict=True):
+        state = ComputeState.new(recording.model, options.settings)
+        if state.observer is not None:
+            state.decide(bool(velocities))
+        if state.method == "observer":
+            method = "observer"
+            if raw is not None:
+                observed = observe_raw(recording.model, options.settings, raw, state)
+                assert observed is not None
+                out.append(observed.external)
+            continue
+        inputs = prepare_inputs(recording, options, lambda what, fraction: None)
+        for result, _, _ in results(recording.model, inputs, options, [], state):
+            if result is not None and result.dynamics is not None:
+                out.append(result.dynamics.external)
+    if not out:
+        return np.zeros((0, len(recordings[0].model.joint_names))), method
+    return np.concatenate(out), method
+
+
+def _rms(external: np.ndarray) -> np.ndarray:
+    if not len(external):
+        return np.full(external.shape[1], np.nan)
+    return np.sqrt(np.nanmean(np.square(external), axis=0))
+
+
+def _fitted_parameters(names: Sequence[str], fits: list[JointFit], stribeck: bool) -> dict[str, Any]:
+    def rounded(values: Sequence[float]) -> list[float]:
+        return [float(f"{v:.6g}") for v in values]
+
+    out: dict[str, Any] = {
+        "effort.joint_names": list(names),
+        "effort.scale": rounded([f.scale for f in fits]),
+        "effort.offset": rounded([f.offset for f in fits]),
+        "friction.joint_names": list(names),
+        "friction.coulomb": rounded([f.coulomb for f in fits]),
+        "friction.viscous": rounded([f.viscous for f in fits]),
+        "friction.velocity_scale": rounded([f.velocity_scale for f in fits]),
+    }
+    if stribeck:
+        out["friction.stribeck"] = rounded([f.stribeck for f in fits])
+    return out

@@ -1,0 +1,104 @@
+"""``neforward calibrate`` from its parsed command line: the fit, its report, the params file."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from neforward_ros.bag.report import Progress
+from neforward_ros.calibration.calibrate import THRESHOLD_MARGIN, Calibration, calibrate
+from neforward_ros.calibration.params_file import params_yaml
+from neforward_ros.errors import InputError
+
+
+def add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("inputs", nargs="+", metavar="RECORDING", help="rosbag2 recordings of free motion (no contact)")
+    parser.add_argument("-o", "--output", required=True, help="the params file to write (must not exist)")
+    parser.add_argument("--urdf", help="URDF or xacro file (default: the recordings' robot_description topic)")
+    parser.add_argument("--joint-states", help="joint-state topic (default: the recordings' JointState topic)")
+    parser.add_argument(
+        "--params", metavar="FILE", help="ROS 2 params file: kept in the output, and the prior of what is not fitted"
+    )
+    parser.add_argument(
+        "-p", "--param", action="append", default=[], metavar="NAME:=VALUE", help="a node parameter, as --params"
+    )
+    parser.add_argument("--stribeck", action="store_true", help="also fit a Stribeck term per joint")
+
+
+def run_calibrate(args: argparse.Namespace) -> int:
+    """Calibrate, print the report, write the params file (all at once: nothing after Ctrl-C)."""
+    from neforward_ros.parameters.files import command_line_parameters, load_params_file
+
+    output = Path(args.output)
+    if output.exists():
+        raise InputError(f"{output} exists already; remove it or choose another name")
+    if not output.absolute().parent.is_dir():
+        raise InputError(f"cannot write {output}: no such folder {output.absolute().parent}")
+    values: dict[str, Any] = {}
+    if args.params:
+        if not Path(args.params).is_file():
+            raise InputError(f"no such params file: {args.params}")
+        values.update(load_params_file(args.params))
+    values.update(command_line_parameters([t for rule in args.param for t in ("-p", rule)])[1])
+    found = calibrate(
+        [Path(p) for p in args.inputs],
+        values,
+        urdf=args.urdf,
+        joint_states_topic=args.joint_states,
+        stribeck=args.stribeck,
+        progress=Progress(),
+    )
+    text = params_yaml(found.parameters, header=_header(found, args.inputs))
+    partial = output.with_name(f".{output.name}.partial-{os.getpid()}")
+    partial.write_text(text)
+    stops = {signal.SIGINT, signal.SIGTERM}
+    blocked = signal.pthread_sigmask(signal.SIG_BLOCK, stops)
+    try:
+        partial.rename(output)
+        for pending in signal.sigpending() & stops:
+            signal.sigwait({pending})
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+        partial.unlink(missing_ok=True)
+    try:
+        print(describe(found, output))
+    except KeyboardInterrupt:
+        pass  # the file is written: saying so is all that was left
+    return 0
+
+
+def describe(found: Calibration, output: Path) -> str:
+    """The report: each joint's fitted parameters, its external torque RMS before and after, and its
+    contact threshold; then what could not be fitted."""
+    rows = [
+        f"calibrated on {found.samples} joint states; external torques by the {found.method}",
+        f"{'joint':<24}{'scale':>8}{'offset':>9}{'coulomb':>9}{'viscous':>9}{'v_scale':>9}"
+        f"{'RMS before':>12}{'RMS after':>11}{'threshold':>11}",
+    ]
+    for k, (name, fit) in enumerate(zip(found.joint_names, found.fits, strict=True)):
+        rows.append(
+            f"{name:<24}{fit.scale:>8.3f}{fit.offset:>9.3f}{fit.coulomb:>9.3f}{fit.viscous:>9.3f}"
+            f"{fit.velocity_scale:>9.4f}{found.before[k]:>12.3f}{found.after[k]:>11.3f}{found.thresholds[k]:>11.3f}"
+        )
+    rows.append(
+        f"(RMS: the external torque in this free motion, N m (N), with the given parameters and with the fitted "
+        f"ones; threshold: {THRESHOLD_MARGIN:g} x its largest)"
+    )
+    rows += [f"warning: {note}" for note in found.notes]
+    rows.append(f"wrote {output}")
+    return "\n".join(rows)
+
+
+def _header(found: Calibration, inputs: list[str]) -> str:
+    worst = float(np.nanmax(found.after)) if len(found.after) else float("nan")
+    return (
+        f"Written by neforward calibrate from {', '.join(inputs)}: {found.samples} joint states of free motion.\n"
+        f"External torques by the {found.method}; the largest RMS left in that motion: {worst:.3g} N m.\n"
+        "Use: neforward bag REC -o OUT --params FILE; neforward run --params FILE;\n"
+        "ros2 run neforward_ros neforward_node --ros-args --params-file FILE"
+    )

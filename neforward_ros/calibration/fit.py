@@ -1,0 +1,303 @@
+"""Each joint's effort scale and offset and its friction, by least squares on free motion.
+
+With no contact, the generalized momentum p = M(q) qd of the arm changes at the rate
+
+    dp/dt = scale * effort + offset - tau_f(qd) - g(q) + C(q, qd)^T qd
+
+(:mod:`neforward_ros.kinematics.joint_space`). Averaged over a window [a, b], with no acceleration
+anywhere:
+
+    (p(b) - p(a)) / (b - a) + mean(g - C^T qd) = scale * mean(effort) + offset
+                                                 - coulomb * mean(tanh(qd / velocity_scale))
+                                                 - viscous * mean(qd) - stribeck * mean(...)
+
+which is linear in each joint's scale, offset and friction coefficients, given the velocity scales
+(chosen from a few candidates, the one with the least residual). Every window gives one equation per
+joint, and each joint's coefficients are fitted on its own. A parameter the motion does not excite
+is kept at its prior and said: Coulomb friction on a joint that never reversed, viscous friction on
+a joint that moved at one speed, the scale where its uncertainty is large.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from neforward_ros.kinematics.effort_model import DEFAULT_STRIBECK_VELOCITY, EffortModel, friction_shapes
+
+WINDOW = 0.05
+"""s: the windows the momentum equation is averaged over."""
+VELOCITY_SCALES = tuple(float(v) for v in np.geomspace(0.001, 0.1, 21))
+"""rad/s (m/s): the smooth sign's candidate velocity scales (then refined between neighbours)."""
+REVERSALS = 0.05
+"""The least fraction of the samples each way (faster than 2 velocity scales) for Coulomb friction."""
+SPEED_RANGE = 0.05
+"""rad/s (m/s): the least spread of the windows' mean speeds for viscous friction."""
+SCALE_UNCERTAINTY = 0.05
+"""The largest relative standard error of a fitted effort scale; above it the scale is kept."""
+
+
+@dataclass
+class _Run:
+    """One contiguous run of samples, cut into windows [a, b)."""
+
+    t: np.ndarray  # (T,) s
+    a: np.ndarray
+    b: np.ndarray
+    qd: np.ndarray  # (T, n)
+
+    def mean(self, x: np.ndarray) -> np.ndarray:
+        """Each window's mean of x ((T,) or (T, n)), trapezoid rule."""
+        dt = np.diff(self.t)
+        steps = 0.5 * (x[1:] + x[:-1]) * (dt if x.ndim == 1 else dt[:, None])
+        integral = np.concatenate([np.zeros((1, *x.shape[1:])), np.cumsum(steps, axis=0)])
+        span = self.t[self.b] - self.t[self.a]
+        return (integral[self.b] - integral[self.a]) / (span if x.ndim == 1 else span[:, None])
+
+
+@dataclass
+class Windows:
+    """The momentum equation averaged over windows: per window and joint (W, n).
+
+    Attributes:
+        target: (p(b) - p(a)) / (b - a) + mean(g - C^T qd).
+        effort: mean(effort).
+        velocity: mean(qd).
+        speeds: (T, n) the samples' velocities (for the checks of excitation).
+    """
+
+    target: np.ndarray
+    effort: np.ndarray
+    velocity: np.ndarray
+    speeds: np.ndarray
+    runs: list[_Run]
+    stribeck_velocity: float
+
+    def shapes(self, j: int, velocity_scale: float) -> tuple[np.ndarray, np.ndarray]:
+        """Joint j's window means of tanh(qd / velocity_scale) and of the Stribeck shape times it."""
+        signs, decays = [], []
+        for run in self.runs:
+            sign, decay = friction_shapes(run.qd[:, j], velocity_scale, self.stribeck_velocity)
+            signs.append(run.mean(sign))
+            decays.append(run.mean(sign * decay))
+        return np.concatenate(signs), np.concatenate(decays)
+
+
+def windows(
+    stamps_ns: np.ndarray,
+    momentum: np.ndarray,
+    rest: np.ndarray,
+    efforts: np.ndarray,
+    qd: np.ndarray,
+    runs: Sequence[tuple[int, int]],
+    window: float = WINDOW,
+    stribeck_velocity: float = DEFAULT_STRIBECK_VELOCITY,
+) -> Windows:
+    """The windows of contiguous runs of samples ([start, stop) index pairs, no restart inside).
+
+    Args:
+        stamps_ns: (T,) int ns.
+        momentum: (T, n) p.
+        rest: (T, n) g - C^T qd.
+        efforts, qd: (T, n) measured efforts and velocities.
+    """
+    parts: dict[str, list[np.ndarray]] = {"target": [], "effort": [], "velocity": []}
+    kept: list[_Run] = []
+    for start, stop in runs:
+        t = (stamps_ns[start:stop] - stamps_ns[start]) / 1e9
+        if len(t) < 3:
+            continue
+        step = max(1, round(window / float(np.median(np.diff(t)))))
+        edges = np.arange(0, len(t), step)
+        if len(edges) < 2:
+            continue
+        run = _Run(t, edges[:-1], edges[1:], qd[start:stop])
+        kept.append(run)
+        p = momentum[start:stop]
+        span = (t[run.b] - t[run.a])[:, None]
+        parts["target"].append((p[run.b] - p[run.a]) / span + run.mean(rest[start:stop]))
+        parts["effort"].append(run.mean(efforts[start:stop]))
+        parts["velocity"].append(run.mean(run.qd))
+    if not parts["target"]:
+        raise ValueError("no window: the recordings are too short")
+    return Windows(
+        np.concatenate(parts["target"]),
+        np.concatenate(parts["effort"]),
+        np.concatenate(parts["velocity"]),
+        qd,
+        kept,
+        stribeck_velocity,
+    )
+
+
+@dataclass
+class JointFit:
+    """One joint's fitted parameters, how well they fit, and what could not be fitted."""
+
+    scale: float = 1.0
+    offset: float = 0.0
+    coulomb: float = 0.0
+    viscous: float = 0.0
+    velocity_scale: float = 0.01
+    stribeck: float = 0.0
+    residual_before: float = float("nan")
+    residual_after: float = float("nan")
+    notes: list[str] = field(default_factory=list)
+
+
+def fit_joints(data: Windows, names: Sequence[str], prior: EffortModel, stribeck: bool = False) -> list[JointFit]:
+    """Each joint's parameters (see the module docstring); ``prior``: the values kept where the motion
+    does not tell (and the residual before)."""
+    fits = []
+    for j, name in enumerate(names):
+        fits.append(_fit_joint(data, j, name, prior, stribeck))
+    return fits
+
+
+def _fit_joint(data: Windows, j: int, name: str, prior: EffortModel, stribeck: bool) -> JointFit:
+    y = data.target[:, j]
+    effort = data.effort[:, j]
+    velocity = data.velocity[:, j]
+    speeds = data.speeds[:, j]
+    fit = JointFit()
+    sign_prior, _ = data.shapes(j, float(prior.velocity_scale[j]))
+    before = prior.scale[j] * effort + prior.offset[j] - prior.coulomb[j] * sign_prior - prior.viscous[j] * velocity
+    fit.residual_before = float(np.sqrt(np.mean(np.square(y - before))))
+    free = {"scale": True, "coulomb": True, "viscous": True, "stribeck": stribeck}
+    threshold = 2 * min(VELOCITY_SCALES)
+    forwards, backwards = float(np.mean(speeds > threshold)), float(np.mean(speeds < -threshold))
+    if min(forwards, backwards) < REVERSALS:
+        free["coulomb"] = free["stribeck"] = False
+        fit.notes.append(
+            f"joint {name} hardly reversed ({forwards:.0%} of the samples one way, {backwards:.0%} the other): its "
+            "Coulomb friction cannot be told from its offset; kept at "
+            f"{prior.coulomb[j]:g} (move it both ways for longer)"
+        )
+    if float(np.std(velocity)) < SPEED_RANGE:
+        free["viscous"] = False
+        fit.notes.append(
+            f"joint {name} moved within too narrow a range of speeds (spread {float(np.std(velocity)):.3g}): its "
+            f"viscous friction is kept at {prior.viscous[j]:g} (move it at several speeds)"
+        )
+
+    def attempt(velocity_scale: float) -> tuple[float, dict[str, float]] | None:
+        sign, decay = data.shapes(j, velocity_scale)
+        return _solve(y, effort, velocity, sign, decay, free, prior, j)
+
+    best = _best_scale(attempt) if free["coulomb"] else None
+    if best is None:
+        solved = attempt(float(prior.velocity_scale[j]))
+        best = None if solved is None else (solved[0], float(prior.velocity_scale[j]), solved[1])
+    if best is None:
+        fit.notes.append(f"joint {name}: nothing could be fitted; the prior is kept")
+        fit.scale, fit.offset = float(prior.scale[j]), float(prior.offset[j])
+        fit.coulomb, fit.viscous = float(prior.coulomb[j]), float(prior.viscous[j])
+        fit.residual_after = fit.residual_before
+        return fit
+    residual, velocity_scale, values = best
+    if free["scale"] and values.get("scale_error", 0.0) > SCALE_UNCERTAINTY * abs(values["scale"]):
+        free["scale"] = False
+        fit.notes.append(
+            f"joint {name}: its effort scale is uncertain by {values['scale_error'] / abs(values['scale']):.1%} "
+            f"(its torque varied too little against its noise and friction): kept at {prior.scale[j]:g}"
+        )
+        solved = attempt(velocity_scale)
+        assert solved is not None
+        residual, values = solved
+    fit.scale, fit.offset = values["scale"], values["offset"]
+    fit.coulomb, fit.viscous, fit.stribeck = values["coulomb"], values["viscous"], values["stribeck"]
+    fit.velocity_scale = velocity_scale
+    fit.residual_after = residual
+    return fit
+
+
+def _best_scale(attempt) -> tuple[float, float, dict[str, float]] | None:
+    """The velocity scale with the least residual: the best of the candidates, then golden-section
+    search between its neighbours (on the logarithm of the scale)."""
+    tried = [(scale, attempt(scale)) for scale in VELOCITY_SCALES]
+    scored = [(solved[0], scale, solved[1]) for scale, solved in tried if solved is not None]
+    if not scored:
+        return None
+    best = min(scored)
+    k = VELOCITY_SCALES.index(best[1])
+    low = np.log(VELOCITY_SCALES[max(k - 1, 0)])
+    high = np.log(VELOCITY_SCALES[min(k + 1, len(VELOCITY_SCALES) - 1)])
+    ratio = (np.sqrt(5.0) - 1.0) / 2.0
+    for _ in range(12):
+        x1, x2 = high - ratio * (high - low), low + ratio * (high - low)
+        f1, f2 = attempt(float(np.exp(x1))), attempt(float(np.exp(x2)))
+        r1 = f1[0] if f1 is not None else np.inf
+        r2 = f2[0] if f2 is not None else np.inf
+        if r1 < r2:
+            high = x2
+        else:
+            low = x1
+    middle = float(np.exp(0.5 * (low + high)))
+    refined = attempt(middle)
+    if refined is not None and refined[0] < best[0]:
+        return refined[0], middle, refined[1]
+    return best
+
+
+def _solve(y, effort, velocity, sign, stribeck, free, prior: EffortModel, j: int):
+    """Least squares of one joint with the free parameters; the fixed ones at the prior. Friction
+    coefficients that come out negative are fixed at 0 and the rest fitted again."""
+    free = dict(free)
+    for _ in range(4):
+        columns = {"offset": np.ones_like(y)}
+        fixed = np.zeros_like(y)
+        for key, column, sign_of in (
+            ("scale", effort, 1.0),
+            ("coulomb", sign, -1.0),
+            ("viscous", velocity, -1.0),
+            ("stribeck", stribeck, -1.0),
+        ):
+            if free[key]:
+                columns[key] = sign_of * column
+            else:
+                value = {"scale": prior.scale[j], "coulomb": prior.coulomb[j], "viscous": prior.viscous[j],
+                         "stribeck": prior.stribeck[j]}[key]  # fmt: skip
+                fixed += sign_of * value * column
+        names = list(columns)
+        matrix = np.stack([columns[k] for k in names], axis=1)
+        target = y - fixed
+        solution, *_ = np.linalg.lstsq(matrix, target, rcond=None)
+        values = dict(zip(names, solution.tolist(), strict=True))
+        negative = [k for k in ("coulomb", "viscous", "stribeck") if k in values and values[k] < 0]
+        if negative:
+            for k in negative:
+                free[k] = False
+                prior = _with(prior, k, j, 0.0)
+            continue
+        if "scale" in values and not values["scale"] > 0:
+            free["scale"] = False
+            continue
+        residual_vector = target - matrix @ solution
+        residual = float(np.sqrt(np.mean(np.square(residual_vector))))
+        out = {
+            "scale": float(values.get("scale", prior.scale[j])),
+            "offset": float(values["offset"]),
+            "coulomb": float(values.get("coulomb", prior.coulomb[j])),
+            "viscous": float(values.get("viscous", prior.viscous[j])),
+            "stribeck": float(values.get("stribeck", prior.stribeck[j])),
+        }
+        if "scale" in values:
+            dof = max(len(y) - len(names), 1)
+            variance = float(residual_vector @ residual_vector) / dof
+            try:
+                covariance = variance * np.linalg.inv(matrix.T @ matrix)
+                out["scale_error"] = float(np.sqrt(covariance[names.index("scale"), names.index("scale")]))
+            except np.linalg.LinAlgError:
+                out["scale_error"] = float("inf")
+        return residual, out
+    return None
+
+
+def _with(prior: EffortModel, key: str, j: int, value: float) -> EffortModel:
+    from dataclasses import replace
+
+    array = getattr(prior, key).copy()
+    array[j] = value
+    return replace(prior, **{key: array})

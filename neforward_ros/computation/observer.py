@@ -1,0 +1,162 @@
+"""External torques at the newest sample: a generalized-momentum observer (De Luca and Mattone 2005;
+Haddadin, De Luca and Albu-Schaeffer, IEEE T-RO 2017).
+
+The generalized momentum p = M(q) qd changes at the rate
+
+    dp/dt = tau_m - tau_f - g(q) + C(q, qd)^T qd - tau_x
+
+with tau_m the motors' torques (``effort.*``), tau_f friction (``friction.*``) and tau_x the external
+torque in this project's sign: measured - model, positive where the motors give more than the motion
+needs (Jᵀw, w the wrench the robot exerts on what it touches). So tau_x needs q, qd and efforts, and
+no joint acceleration: the observer follows it through a first-order filter of gain K per joint,
+
+    r(t_k) = a r(t_{k-1}) + (1 - a) [ mean(tau_m - tau_f - g + C^T qd) - (p(t_k) - p(t_{k-1})) / dt ],
+    a = exp(-K dt),
+
+the mean over the step by the trapezoid rule. That is the continuous observer dr/dt = K (tau_x - r),
+exact for a tau_x constant over each step, whatever the stamps' spacing: a step of tau_x shows
+in r as 1 - exp(-K t).
+
+Noise in the velocities would enter r about K |M| times over through the momentum's rate. The
+momentum (and C^T qd) is therefore taken at the velocities low-passed at ``velocity_cutoff``
+(first order); the torques are not filtered, so a push shows as fast as K lets it. What the filter
+costs is the momentum's rate lagging by about 1 / (2 pi cutoff): an error of about
+d^2p/dt^2 / (2 pi cutoff), small for smooth motion (``neforward calibrate`` picks the cutoff that
+leaves the least external torque in a free motion).
+
+It runs on the raw samples as they come (:class:`RawStates`, assembled by
+:mod:`.raw_samples`), not on the estimator's lagged stamps: ~/external_torques and ~/contact leave
+with the newest sample. It restarts (r = 0, no output at that sample) at the start of a stream, after
+a gap longer than max_gap and where time goes back. The node steps it one sample at a time and the
+bag tool a chunk at a time, through :func:`observe`, with the same numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from neforward_ros.kinematics.effort_model import EffortModel
+from neforward_ros.kinematics.joint_space import momentum_values
+from neforward_ros.model import RobotModel
+from neforward_ros.stamps import NS
+
+
+@dataclass(frozen=True)
+class RawStates:
+    """Measured joint states, as the messages gave them, at one stamp ((n,) arrays) or T ((T, n)).
+
+    Attributes:
+        stamps: int ns, or (T,) int64, increasing.
+        q, qd: rad (m), rad/s (m/s); every joint's (its newest sample at or before the stamp).
+        efforts: as the messages gave them (before ``effort.*``); NaN where a joint has none.
+        restart: whether the observer restarts at the stamp (a new stream or segment, a gap).
+    """
+
+    stamps: Any
+    q: np.ndarray
+    qd: np.ndarray
+    efforts: np.ndarray
+    restart: Any
+
+    @property
+    def single(self) -> bool:
+        return self.q.ndim == 1
+
+    def __len__(self) -> int:
+        return 1 if self.single else len(self.stamps)
+
+    def part(self, index: Any) -> RawStates:
+        return RawStates(*(getattr(self, name)[index] for name in ("stamps", "q", "qd", "efforts", "restart")))
+
+    @classmethod
+    def stack(cls, parts: list[RawStates]) -> RawStates:
+        def rows(name: str) -> np.ndarray:
+            return np.stack([getattr(p, name) for p in parts])
+
+        return cls(
+            np.array([p.stamps for p in parts], dtype=np.int64),
+            rows("q"),
+            rows("qd"),
+            rows("efforts"),
+            np.array([bool(p.restart) for p in parts]),
+        )
+
+
+class ObserverState:
+    """What the observer carries from one sample to the next, for one model and one stream.
+
+    Args:
+        gains: (n,) K per joint, 1/s.
+        gravity: m/s^2 in the root frame (the root at rest).
+        velocity_cutoff: Hz, the velocities' low-pass for the momentum; 0 for none.
+    """
+
+    def __init__(self, gains: np.ndarray, gravity: tuple[float, float, float], velocity_cutoff: float = 0.0) -> None:
+        self.gains = np.asarray(gains, dtype=float)
+        self.gravity_force = -np.asarray(gravity, dtype=float)
+        self.cutoff = 2.0 * math.pi * velocity_cutoff  # rad/s; 0: no filter
+        self.velocity: np.ndarray | None = None  # the filtered velocities at the previous sample
+        self.stamp: int | None = None
+        self.momentum: np.ndarray | None = None
+        self.rate: np.ndarray | None = None  # tau_m - tau_f - g + C^T qd at the previous sample
+        self.external = np.zeros(len(self.gains))
+
+    def restart(self) -> None:
+        """Forget the momentum and the estimate (the velocity filter restarts on its own rules)."""
+        self.stamp = None
+        self.momentum = None
+        self.rate = None
+        self.external = np.zeros(len(self.gains))
+
+
+def observe(model: RobotModel, raw: RawStates, effort: EffortModel, state: ObserverState) -> np.ndarray:
+    """The external torques at the raw samples' stamps: (n,) or (T, n), N m (N); NaN at a restart and
+    for joints without a measured effort."""
+    single = raw.single
+    q, qd = (np.atleast_2d(x) for x in (raw.q, raw.qd))
+    efforts = np.atleast_2d(raw.efforts)
+    stamps = [int(raw.stamps)] if single else raw.stamps.tolist()
+    restarts = [bool(raw.restart)] if single else raw.restart.tolist()
+    values = momentum_values(model, q, _filtered(qd, stamps, restarts, state), state.gravity_force)
+    n = q.shape[1]
+    momentum, coriolis, gravity = values[:, :n], values[:, n : 2 * n], values[:, 2 * n :]
+    rate = effort.motor(efforts) - effort.friction(qd) - gravity + coriolis
+    out = np.full((len(stamps), n), np.nan)
+    gains = state.gains
+    for k, stamp in enumerate(stamps):
+        if restarts[k] or state.stamp is None or stamp <= state.stamp:
+            state.restart()
+        else:
+            dt = (stamp - state.stamp) / NS
+            a = np.exp(-gains * dt) if len(gains) > 1 else math.exp(-gains[0] * dt)
+            assert state.momentum is not None and state.rate is not None
+            step = 0.5 * (rate[k] + state.rate) - (momentum[k] - state.momentum) / dt
+            state.external = a * state.external + (1.0 - a) * step
+            out[k] = state.external
+        state.stamp, state.momentum, state.rate = stamp, momentum[k], rate[k]
+        if not np.isfinite(state.external).all():  # a joint without an effort: NaN there, the others go on
+            state.external = np.where(np.isfinite(state.external), state.external, 0.0)
+    return out[0] if single else out
+
+
+def _filtered(qd: np.ndarray, stamps: list[int], restarts: list[bool], state: ObserverState) -> np.ndarray:
+    """The velocities low-passed (first order, ``state.cutoff``), sample by sample from the state's;
+    as they are at a restart or without a cutoff."""
+    if not state.cutoff:
+        return qd
+    out = np.empty_like(qd)
+    previous, last = state.velocity, state.stamp
+    for k, stamp in enumerate(stamps):
+        if restarts[k] or previous is None or last is None or stamp <= last:
+            previous = qd[k]
+        else:
+            a = math.exp(-state.cutoff * (stamp - last) / NS)
+            previous = a * previous + (1.0 - a) * qd[k]
+        out[k] = previous
+        last = stamp
+    state.velocity = previous
+    return out

@@ -1,0 +1,91 @@
+"""What a joint's measured effort means: the motor's torque, less friction.
+
+Per joint, in the model's column order, with qd the joint velocity (rad/s; m/s for a prismatic joint):
+
+    motor torque     tau_m = scale * effort + offset                              (``effort.*``)
+    friction         tau_f = (coulomb + stribeck * exp(-(qd / stribeck_velocity)^2)) * tanh(qd / velocity_scale)
+                             + viscous * qd                                       (``friction.*``)
+
+The smooth sign tanh(qd / velocity_scale) turns friction on within about a velocity scale of rest
+instead of at an exact zero no measured velocity ever has. The model torque behind external torques
+is the inverse dynamics' plus tau_f: external = tau_m - (inverse dynamics + tau_f). The same
+functions give the calibration's regressors (:mod:`neforward_ros.calibration`), so that what it fits
+is what the node computes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+DEFAULT_VELOCITY_SCALE = 0.01
+"""rad/s (m/s): the smooth sign's scale when friction.velocity_scale does not give one."""
+DEFAULT_STRIBECK_VELOCITY = 0.1
+"""rad/s (m/s): the Stribeck term's velocity when friction.stribeck_velocity does not give one."""
+
+
+@dataclass(frozen=True)
+class EffortModel:
+    """Per joint (n,) arrays in the model's column order; see the module docstring."""
+
+    scale: np.ndarray
+    offset: np.ndarray
+    coulomb: np.ndarray
+    viscous: np.ndarray
+    velocity_scale: np.ndarray
+    stribeck: np.ndarray
+    stribeck_velocity: np.ndarray
+
+    @classmethod
+    def of(
+        cls,
+        joint_names: Sequence[str],
+        scale: Mapping[str, float] | None = None,
+        offset: Mapping[str, float] | None = None,
+        coulomb: Mapping[str, float] | None = None,
+        viscous: Mapping[str, float] | None = None,
+        velocity_scale: Mapping[str, float] | None = None,
+        stribeck: Mapping[str, float] | None = None,
+        stribeck_velocity: Mapping[str, float] | None = None,
+    ) -> EffortModel:
+        """The model of these joints from per-joint values (joints not named: no friction, scale 1,
+        offset 0, the default velocities)."""
+
+        def column(values: Mapping[str, float] | None, default: float) -> np.ndarray:
+            values = values or {}
+            return np.array([float(values.get(name, default)) for name in joint_names])
+
+        return cls(
+            column(scale, 1.0),
+            column(offset, 0.0),
+            column(coulomb, 0.0),
+            column(viscous, 0.0),
+            column(velocity_scale, DEFAULT_VELOCITY_SCALE),
+            column(stribeck, 0.0),
+            column(stribeck_velocity, DEFAULT_STRIBECK_VELOCITY),
+        )
+
+    @property
+    def has_friction(self) -> bool:
+        return bool(np.any(self.coulomb) or np.any(self.viscous) or np.any(self.stribeck))
+
+    def motor(self, efforts: np.ndarray) -> np.ndarray:
+        """The motors' torques from measured efforts ((..., n); NaN stays NaN)."""
+        return self.scale * efforts + self.offset
+
+    def friction(self, qd: np.ndarray) -> np.ndarray:
+        """Friction torques at joint velocities qd ((..., n))."""
+        if not self.has_friction:
+            return np.zeros_like(qd)
+        sign, stribeck = friction_shapes(qd, self.velocity_scale, self.stribeck_velocity)
+        return (self.coulomb + self.stribeck * stribeck) * sign + self.viscous * qd
+
+
+def friction_shapes(
+    qd: np.ndarray, velocity_scale: np.ndarray | float, stribeck_velocity: np.ndarray | float
+) -> tuple[np.ndarray, np.ndarray]:
+    """(smooth sign tanh(qd / velocity_scale), Stribeck decay exp(-(qd / stribeck_velocity)^2)): the
+    shapes the Coulomb and Stribeck coefficients multiply."""
+    return np.tanh(qd / velocity_scale), np.exp(-np.square(qd / stribeck_velocity))
