@@ -15,7 +15,10 @@ The true external torque, in neforward_ros's sign (measured - model: J^T w, w th
 exerts on what pushes it, -F), is kept with the recording, with each push's start and end. Nothing
 here uses neforward_ros's dynamics.
 
-Usage: python examples/arm_simulator.py OUTPUT [--urdf FILE] [--seconds 60] [--pushes] [--seed 0]
+Usage: python examples/arm_simulator.py OUTPUT [--urdf FILE --tool LINK] [--seconds 60] [--pushes] [--pause T]
+       [--seed 0] [--arm-seed 7] [--velocity-noise 0.002]
+writes the recording OUTPUT and, beside it, OUTPUT.truth.npz: the true external torques at every
+stamp, the pushes' intervals and the arm's friction, offsets and scales.
 """
 
 from __future__ import annotations
@@ -155,10 +158,23 @@ def simulate(arm: Arm, seconds: float) -> Simulated:
 
     text = arm.urdf.read_text()
     model = pin.buildModelFromXML(text, mimic=True)
-    names = [model.names[k] for k in range(1, model.njoints) if model.joints[k].nq == 1]
-    if len(names) != model.nq or model.nq != model.nv:
-        raise ValueError("the simulator takes arms of revolute and prismatic joints only")
+    moving = [k for k in range(1, model.njoints) if model.joints[k].nv == 1]
+    names = [model.names[k] for k in moving]
+    if len(names) != model.nv:
+        raise ValueError("the simulator takes arms of revolute, continuous and prismatic joints only")
     n = len(names)
+
+    def configuration(q_row: np.ndarray) -> np.ndarray:
+        """Pinocchio's q of our joint positions (cos, sin for a continuous joint)."""
+        out = np.zeros(model.nq)
+        for column, k in enumerate(moving):
+            joint = model.joints[k]
+            if joint.nq == 2:
+                out[joint.idx_q], out[joint.idx_q + 1] = np.cos(q_row[column]), np.sin(q_row[column])
+            else:
+                out[joint.idx_q] = q_row[column]
+        return out
+
     tool = model.getFrameId(arm.tool)
     point = model.addFrame(
         pin.Frame("push_point", model.frames[tool].parentJoint, tool,
@@ -168,8 +184,14 @@ def simulate(arm: Arm, seconds: float) -> Simulated:
     rng = np.random.default_rng(arm.seed)
     count = int(seconds * arm.rate)
     t = (np.arange(count) + rng.uniform(-arm.jitter, arm.jitter, count)) / arm.rate
-    lower, upper = model.lowerPositionLimit, model.upperPositionLimit
-    centre = np.where(np.isfinite(lower) & np.isfinite(upper) & (upper - lower < 10), 0.5 * (lower + upper), 0.0)
+    lower = np.array(
+        [model.lowerPositionLimit[model.joints[k].idx_q] if model.joints[k].nq == 1 else -np.inf for k in moving]
+    )
+    upper = np.array([model.upperPositionLimit[model.joints[k].idx_q] if model.joints[k].nq == 1 else np.inf
+                      for k in moving])  # fmt: skip
+    limited = np.isfinite(lower) & np.isfinite(upper)
+    centre = np.zeros(n)
+    centre[limited] = np.where(upper[limited] - lower[limited] < 10, 0.5 * (lower[limited] + upper[limited]), 0.0)
     centre = np.clip(centre + rng.uniform(-0.3, 0.3, n), lower + 0.7, upper - 0.7)
     q, qd, qdd = motion(arm, t, n, centre)
     force = np.zeros((count, 3))
@@ -188,9 +210,10 @@ def simulate(arm: Arm, seconds: float) -> Simulated:
     tau_motion = np.zeros((count, n))
     tau_push = np.zeros((count, n))
     for k in range(count):
-        tau_motion[k] = pin.rnea(model, data, q[k], qd[k], qdd[k])
+        configuration_k = configuration(q[k])
+        tau_motion[k] = pin.rnea(model, data, configuration_k, qd[k], qdd[k])
         if magnitude[k] > 0:
-            pin.computeJointJacobians(model, data, q[k])
+            pin.computeJointJacobians(model, data, configuration_k)
             pin.updateFramePlacements(model, data)
             jacobian = pin.getFrameJacobian(model, data, point, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
             tau_push[k] = jacobian[:3].T @ force[k]
@@ -251,20 +274,31 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("output", type=Path, help="the recording to write (a folder; must not exist)")
     parser.add_argument("--urdf", type=Path, default=Path(__file__).resolve().parent.parent / "config" / "panda.urdf")
-    parser.add_argument("--tool", default="panda_hand")
+    parser.add_argument("--tool", default="panda_hand", help="the link pushed")
     parser.add_argument("--seconds", type=float, default=60.0)
-    parser.add_argument("--pushes", action="store_true", help="three 15 N pushes on the tool, from 3 s, 4 s apart")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--pushes", action="store_true", help="three 15 N pushes on the tool, from 3 s, 5 s apart")
+    parser.add_argument("--pause", type=float, help="a 2 s pause of the whole arm from this time, s")
+    parser.add_argument("--seed", type=int, default=0, help="the motion's and the noise's")
+    parser.add_argument("--arm-seed", type=int, default=7, help="the arm's friction, offsets and scales")
+    parser.add_argument("--velocity-noise", type=float, default=0.002, help="rad/s")
     args = parser.parse_args()
     import pinocchio as pin
 
     n = pin.buildModelFromXML(args.urdf.read_text(), mimic=True).nv
-    joints = random_joints(n, np.random.default_rng(args.seed + 7))
-    pushes = standard_pushes(3.0) if args.pushes else ()
-    arm = Arm(args.urdf, args.tool, joints, pushes=pushes, seed=args.seed, still=(n - 1,) if n == 8 else ())
+    joints = random_joints(n, np.random.default_rng(args.arm_seed))
+    pushes = standard_pushes(3.0, 5.0) if args.pushes else ()
+    pauses = ((args.pause, 2.0),) if args.pause is not None else ()
+    still = (n - 1,) if n == 8 else ()  # the bundled arm's finger
+    arm = Arm(args.urdf, args.tool, joints, pushes=pushes, pauses=pauses, seed=args.seed, still=still,
+              velocity_noise=args.velocity_noise)  # fmt: skip
     simulated = simulate(arm, args.seconds)
     write(simulated, args.urdf.read_text(), args.output)
-    print(f"{args.output}: {len(simulated.stamps)} joint states over {args.seconds:g} s at {arm.rate:g} Hz")
+    truth = args.output.with_name(args.output.name + ".truth.npz")
+    np.savez(truth, names=np.array(simulated.names), stamps=simulated.stamps, external=simulated.true_external,
+             intervals=np.array(simulated.intervals, dtype=np.int64).reshape(-1, 2), coulomb=joints.coulomb,
+             viscous=joints.viscous, offset=joints.offset, scale=joints.scale)  # fmt: skip
+    print(f"{args.output}: {len(simulated.stamps)} joint states over {args.seconds:g} s at {arm.rate:g} Hz; "
+          f"the truth in {truth}")  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -56,6 +56,8 @@ REQUIREMENTS = {
     "test_pipeline_messages.py": ("scipy", "rosbags", "pinocchio"),
     "test_recursion_pinocchio.py": ("pinocchio",),
     "test_joint_space.py": ("pinocchio",),
+    "test_contact.py": ("pinocchio", "rosbags"),
+    "test_contact_live.py": ("pinocchio", "rosbags", "cyclonedds"),
 }
 
 

@@ -9,9 +9,10 @@ thresholds out, as a params file the node and the bag tool take as it is.
 2. Each joint's effort scale and offset and its friction are fitted by least squares on the
    momentum equation, with no acceleration (:mod:`.fit`).
 3. The external torques the node would then publish on that free motion (the shared computation,
-   with the fitted parameters) give each joint's contact threshold: 1.5 times the largest of them
+   with the fitted parameters) give each joint's contact threshold: twice the largest of them
    in absolute value (at least :data:`THRESHOLD_FLOOR`), so that the motion calibrated on raises no
-   contact, with a margin for what it did not show. The contact debounce is the observer's time
+   contact, with a margin for what it did not show; a contact ends once every joint is under
+   :data:`RELEASE` of its threshold (hysteresis). The contact debounce is the observer's time
    constant, 1 / gain (at least a millisecond): its output is already filtered, and a longer
    debounce only delays the contact. Unless given, the observer's velocity cutoff is chosen among
    :data:`CUTOFFS` on the free motion: the highest (the least lag) whose external torques have a
@@ -39,13 +40,15 @@ from neforward_ros.errors import InputError
 from neforward_ros.kinematics.joint_space import momentum_values
 from neforward_ros.parameters.settings import node_settings
 
-THRESHOLD_MARGIN = 1.5
+THRESHOLD_MARGIN = 2.0
 """Contact thresholds: this many times the largest external torque in the free motion."""
+RELEASE = 0.6
+"""The contact's hysteresis: a contact ends once every joint is under this fraction of its threshold."""
 THRESHOLD_FLOOR = 0.05
 """N m (N): the least contact threshold."""
 CUTOFFS = (0.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 """Hz: the observer's velocity cutoffs tried (0: no filter)."""
-CUTOFF_SLACK = 1.2
+CUTOFF_SLACK = 2.5
 """The velocity cutoff taken: the highest whose free-motion mean square is within this factor of the least."""
 
 
@@ -132,7 +135,7 @@ def calibrate(
         momentum.append(p)
         rest.append(r)
         efforts.append(raw.efforts)
-        qd.append(raw.qd)
+        qd.append(_smoothed(raw.qd, raw.stamps, [(a - offset, b - offset) for a, b in runs if a >= offset]))
         offset += len(raw)
     progress("fitting", 0.0)
     data = windows(
@@ -172,6 +175,7 @@ def calibrate(
     thresholds = np.maximum(THRESHOLD_MARGIN * np.nan_to_num(largest, nan=0.0), THRESHOLD_FLOOR)
     fitted["contact.joint_names"] = list(names)
     fitted["contact.thresholds"] = [float(f"{x:.4g}") for x in thresholds]
+    fitted["contact.release"] = RELEASE
     if method == "observer":
         gains = np.array([fitted_options.settings.observer_gains.get(n, fitted_options.settings.observer_gain)
                           for n in names])  # fmt: skip
@@ -189,6 +193,30 @@ def calibrate(
         sum(len(p[0]) for p in parts),
         notes,
     )
+
+
+SMOOTHING = 0.02
+"""s: the friction regressors take the velocities averaged over this span, centred, twice (no lag),
+which keeps velocity noise out of the nonlinear friction shapes (the momentum keeps them as measured)."""
+
+
+def _smoothed(qd: np.ndarray, stamps: np.ndarray, runs: list[tuple[int, int]]) -> np.ndarray:
+    """Each run's velocities, centred moving average of :data:`SMOOTHING`, applied twice."""
+    out = qd.copy()
+    for start, stop in runs:
+        if stop - start < 3:
+            continue
+        step = float(np.median(np.diff(stamps[start:stop]))) / 1e9
+        width = max(1, round(SMOOTHING / step)) | 1
+        kernel = np.ones(width)
+        part = qd[start:stop]
+        counts = np.convolve(np.ones(len(part)), kernel, mode="same")[:, None]
+        for _ in range(2):
+            part = (
+                np.stack([np.convolve(part[:, j], kernel, mode="same") for j in range(part.shape[1])], axis=1) / counts
+            )
+        out[start:stop] = part
+    return out
 
 
 def _options(values: Mapping[str, Any], urdf: str | None, topic: str | None) -> BagOptions:

@@ -32,7 +32,15 @@ WINDOW = 0.05
 VELOCITY_SCALES = tuple(float(v) for v in np.geomspace(0.001, 0.1, 21))
 """rad/s (m/s): the smooth sign's candidate velocity scales (then refined between neighbours)."""
 REVERSALS = 0.05
-"""The least fraction of the samples each way (faster than 2 velocity scales) for Coulomb friction."""
+"""The least fraction of the windows each way (faster than :data:`REVERSAL_SPEED`) for Coulomb friction."""
+REVERSAL_SPEED = 0.01
+"""rad/s (m/s): a window's mean speed that counts as moving one way."""
+SCALE_SIGNAL = 0.1
+"""The scale is fitted only where the model torque varies, beyond what friction and a constant
+explain, by at least this fraction of the friction torque (RMS): elsewhere the scale trades off
+against the friction coefficients, and the fit would pick among them by noise."""
+SCALE_FLOOR = 0.1
+"""N m (N): nor where the model torque varies by less than this beyond friction and a constant."""
 SPEED_RANGE = 0.05
 """rad/s (m/s): the least spread of the windows' mean speeds for viscous friction."""
 SCALE_UNCERTAINTY = 0.05
@@ -166,8 +174,9 @@ def _fit_joint(data: Windows, j: int, name: str, prior: EffortModel, stribeck: b
     before = prior.scale[j] * effort + prior.offset[j] - prior.coulomb[j] * sign_prior - prior.viscous[j] * velocity
     fit.residual_before = float(np.sqrt(np.mean(np.square(y - before))))
     free = {"scale": True, "coulomb": True, "viscous": True, "stribeck": stribeck}
-    threshold = 2 * min(VELOCITY_SCALES)
-    forwards, backwards = float(np.mean(speeds > threshold)), float(np.mean(speeds < -threshold))
+    del speeds  # the windows' means, not the noisy samples, tell whether a joint moved
+    threshold = REVERSAL_SPEED
+    forwards, backwards = float(np.mean(velocity > threshold)), float(np.mean(velocity < -threshold))
     if min(forwards, backwards) < REVERSALS:
         free["coulomb"] = free["stribeck"] = False
         fit.notes.append(
@@ -186,10 +195,34 @@ def _fit_joint(data: Windows, j: int, name: str, prior: EffortModel, stribeck: b
         sign, decay = data.shapes(j, velocity_scale)
         return _solve(y, effort, velocity, sign, decay, free, prior, j)
 
-    best = _best_scale(attempt) if free["coulomb"] else None
-    if best is None:
-        solved = attempt(float(prior.velocity_scale[j]))
-        best = None if solved is None else (solved[0], float(prior.velocity_scale[j]), solved[1])
+    def best_fit() -> tuple[float, float, dict[str, float]] | None:
+        found = _best_scale(attempt) if free["coulomb"] else None
+        if found is None:
+            solved = attempt(float(prior.velocity_scale[j]))
+            found = None if solved is None else (solved[0], float(prior.velocity_scale[j]), solved[1])
+        return found
+
+    if free["scale"]:
+        # Whether the scale can be told from friction: judged with the scale at its prior, since a free
+        # scale could take the friction over where it cannot.
+        free["scale"] = False
+        held = best_fit()
+        free["scale"] = True
+        if held is not None:
+            _, velocity_scale, values = held
+            sign, _ = data.shapes(j, velocity_scale)
+            basis = np.stack([np.ones_like(y), sign, velocity], axis=1)
+            unexplained = y - basis @ np.linalg.lstsq(basis, y, rcond=None)[0]
+            friction = values["coulomb"] * sign + values["viscous"] * velocity
+            signal, friction_rms = float(np.sqrt(np.mean(unexplained**2))), float(np.sqrt(np.mean(friction**2)))
+            if signal < max(SCALE_SIGNAL * friction_rms, SCALE_FLOOR):
+                free["scale"] = False
+                fit.notes.append(
+                    f"joint {name}: its effort scale cannot be told from its friction and offset (its model torque "
+                    f"varied by {signal:.3g} beyond what they explain, against {friction_rms:.3g} of friction): kept "
+                    f"at {prior.scale[j]:g}"
+                )
+    best = best_fit()
     if best is None:
         fit.notes.append(f"joint {name}: nothing could be fitted; the prior is kept")
         fit.scale, fit.offset = float(prior.scale[j]), float(prior.offset[j])

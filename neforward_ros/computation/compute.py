@@ -77,7 +77,9 @@ class ComputeState:
         contact = None
         if settings.contact_thresholds:
             thresholds = np.array([settings.contact_thresholds.get(n, np.nan) for n in names])
-            contact = ContactDetector(thresholds, settings.contact_debounce, names, throttled)
+            contact = ContactDetector(
+                thresholds, settings.contact_debounce, names, throttled, settings.contact_release
+            )
         friction = settings.friction
         effort = EffortModel.of(
             names,
@@ -210,13 +212,14 @@ def observe_raw(model: RobotModel, settings: NodeSettings, raw: RawStates, state
     the contact state and the contact wrench; None when the observer does not give them."""
     if state.observer is None or state.method != "observer":
         return None
-    external = observe(model, raw, state.effort, state.observer)
+    external, filtered = observe(model, raw, state.effort, state.observer)
     contact = None
     if state.contact is not None:
+        slack = state.effort.static_friction(filtered)
         if raw.single:
-            contact = state.contact.update(raw.stamps, external) if np.isfinite(external).any() else None
+            contact = state.contact.update(raw.stamps, external, slack) if np.isfinite(external).any() else None
         else:
-            contact = state.contact.update_many(raw.stamps, external, np.isfinite(external).any(axis=-1))
+            contact = state.contact.update_many(raw.stamps, external, np.isfinite(external).any(axis=-1), slack)
     wrench = None
     if settings.contact_link and settings.contact_link in model.link_index:
         wrench = wrench_at_link(model, raw.q, external, settings.contact_link)

@@ -26,8 +26,10 @@ leaves the least external torque in a free motion).
 
 It runs on the raw samples as they come (:class:`RawStates`, assembled by
 :mod:`.raw_samples`), not on the estimator's lagged stamps: ~/external_torques and ~/contact leave
-with the newest sample. It restarts (r = 0, no output at that sample) at the start of a stream, after
-a gap longer than max_gap and where time goes back. The node steps it one sample at a time and the
+with the newest sample. It restarts (r = 0) at the start of a stream, after a gap longer than max_gap
+and where time goes back, and gives nothing for :data:`WARM_UP` time constants of the velocity
+filter after that: the filter starts from the first velocity, not from its lag behind a moving joint,
+and the momentum's rate is wrong until that start is forgotten. The node steps it one sample at a time and the
 bag tool a chunk at a time, through :func:`observe`, with the same numbers.
 """
 
@@ -43,6 +45,9 @@ from neforward_ros.kinematics.effort_model import EffortModel
 from neforward_ros.kinematics.joint_space import momentum_values
 from neforward_ros.model import RobotModel
 from neforward_ros.stamps import NS
+
+WARM_UP = 3.0
+"""Time constants of the velocity filter (1 / (2 pi cutoff)) after a restart with no output."""
 
 
 @dataclass(frozen=True)
@@ -100,6 +105,8 @@ class ObserverState:
         self.gravity_force = -np.asarray(gravity, dtype=float)
         self.cutoff = 2.0 * math.pi * velocity_cutoff  # rad/s; 0: no filter
         self.velocity: np.ndarray | None = None  # the filtered velocities at the previous sample
+        self.warm_ns = round(WARM_UP / self.cutoff * NS) if self.cutoff else 0
+        self.quiet_until = 0  # no output before this stamp (after a restart)
         self.stamp: int | None = None
         self.momentum: np.ndarray | None = None
         self.rate: np.ndarray | None = None  # tau_m - tau_f - g + C^T qd at the previous sample
@@ -113,15 +120,19 @@ class ObserverState:
         self.external = np.zeros(len(self.gains))
 
 
-def observe(model: RobotModel, raw: RawStates, effort: EffortModel, state: ObserverState) -> np.ndarray:
+def observe(
+    model: RobotModel, raw: RawStates, effort: EffortModel, state: ObserverState
+) -> tuple[np.ndarray, np.ndarray]:
     """The external torques at the raw samples' stamps: (n,) or (T, n), N m (N); NaN at a restart and
-    for joints without a measured effort."""
+    while the velocity filter warms up after it, and for joints without a measured effort. Also the
+    velocities as filtered, of the same shape."""
     single = raw.single
     q, qd = (np.atleast_2d(x) for x in (raw.q, raw.qd))
     efforts = np.atleast_2d(raw.efforts)
     stamps = [int(raw.stamps)] if single else raw.stamps.tolist()
     restarts = [bool(raw.restart)] if single else raw.restart.tolist()
-    values = momentum_values(model, q, _filtered(qd, stamps, restarts, state), state.gravity_force)
+    filtered = _filtered(qd, stamps, restarts, state)
+    values = momentum_values(model, q, filtered, state.gravity_force)
     n = q.shape[1]
     momentum, coriolis, gravity = values[:, :n], values[:, n : 2 * n], values[:, 2 * n :]
     rate = effort.motor(efforts) - effort.friction(qd) - gravity + coriolis
@@ -130,17 +141,19 @@ def observe(model: RobotModel, raw: RawStates, effort: EffortModel, state: Obser
     for k, stamp in enumerate(stamps):
         if restarts[k] or state.stamp is None or stamp <= state.stamp:
             state.restart()
+            state.quiet_until = stamp + state.warm_ns
         else:
             dt = (stamp - state.stamp) / NS
             a = np.exp(-gains * dt) if len(gains) > 1 else math.exp(-gains[0] * dt)
             assert state.momentum is not None and state.rate is not None
             step = 0.5 * (rate[k] + state.rate) - (momentum[k] - state.momentum) / dt
             state.external = a * state.external + (1.0 - a) * step
-            out[k] = state.external
+            if stamp >= state.quiet_until:
+                out[k] = state.external
         state.stamp, state.momentum, state.rate = stamp, momentum[k], rate[k]
         if not np.isfinite(state.external).all():  # a joint without an effort: NaN there, the others go on
             state.external = np.where(np.isfinite(state.external), state.external, 0.0)
-    return out[0] if single else out
+    return (out[0], filtered[0]) if single else (out, filtered)
 
 
 def _filtered(qd: np.ndarray, stamps: list[int], restarts: list[bool], state: ObserverState) -> np.ndarray:

@@ -82,6 +82,13 @@ class EffortModel:
         sign, stribeck = friction_shapes(qd, self.velocity_scale, self.stribeck_velocity)
         return (self.coulomb + self.stribeck * stribeck) * sign + self.viscous * qd
 
+    def static_friction(self, qd: np.ndarray) -> np.ndarray:
+        """The friction the model cannot sign at velocities qd ((..., n)): (coulomb + stribeck) times
+        1 - |tanh(qd / velocity_scale)|, all of it at rest, none once the joint moves clearly."""
+        if not self.has_friction:
+            return np.zeros_like(qd)
+        return (self.coulomb + self.stribeck) * (1.0 - np.abs(np.tanh(qd / self.velocity_scale)))
+
 
 def friction_shapes(
     qd: np.ndarray, velocity_scale: np.ndarray | float, stribeck_velocity: np.ndarray | float

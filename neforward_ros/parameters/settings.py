@@ -50,6 +50,7 @@ class NodeSettings:
         wrench_links: links with ~/<link>/wrench.
         contact_thresholds: joint name -> |external torque| threshold; empty: no ~/contact.
         contact_debounce: s.
+        contact_release: in contact, the fraction of their thresholds the joints must stay over.
         contact_link: the link of ~/contact_wrench, or "" for none.
         base_source: "fixed", "imu" or "odometry".
         base_topic: its topic (relative name).
@@ -82,6 +83,7 @@ class NodeSettings:
     wrench_links: tuple[str, ...] = ()
     contact_thresholds: Mapping[str, float] = field(default_factory=dict)
     contact_debounce: float = 0.02
+    contact_release: float = 1.0
     contact_link: str = ""
     base_source: str = "fixed"
     base_topic: str = ""
@@ -199,6 +201,8 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         raise InputError(
             f"parameter base.max_delay must be a positive number of seconds, got {merged['base.max_delay']}"
         )
+    if not 0.0 < merged["contact.release"] <= 1.0:
+        raise InputError(f"parameter contact.release must be in (0, 1], got {merged['contact.release']}")
     if not merged["contact.debounce"] >= 0.0:
         raise InputError(f"parameter contact.debounce must be at least 0 s, got {merged['contact.debounce']}")
     lag = merged["estimator.lag"]
@@ -240,6 +244,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         wrench_links=tuple(merged["wrench_links"]),
         contact_thresholds=contact_thresholds,
         contact_debounce=merged["contact.debounce"],
+        contact_release=merged["contact.release"],
         contact_link=merged["contact.link"],
         base_source=merged["base.source"],
         base_topic=merged["base.topic"] or {"imu": "imu", "odometry": "odom"}.get(merged["base.source"], ""),

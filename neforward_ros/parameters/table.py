@@ -195,6 +195,13 @@ PARAMETERS: tuple[Parameter, ...] = (
         "contact.debounce", "double", 0.02, "s a change (contact or none) must last before ~/contact follows it."
     ),
     Parameter(
+        "contact.release",
+        "double",
+        1.0,
+        "In contact, the fraction of its threshold a joint's |external torque| must stay over; below it on every "
+        "watched joint for contact.debounce, the contact ends (1: no hysteresis).",
+    ),
+    Parameter(
         "contact.link",
         "string",
         "",
