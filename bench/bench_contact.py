@@ -12,7 +12,7 @@ against the targets (30 ms, 30 ms, none, 10 %, friction 5 %).
 
 The arms are not the test suite's (xArm7); every seed differs from the tests'.
 
-Usage: python bench/bench_contact.py [--quick] [--live]
+Usage: python bench/bench_contact.py [--quick] [--live | --live-only]
     --live also runs ``neforward run --params`` over loopback DDS, feeding each pushed recording in
     real time, and reports the wall-clock delay from sending a push's first sample to ~/contact.
 """
@@ -129,10 +129,89 @@ def case(name: str, urdf: Path, tool: str, noise: float, seed: int, folder: Path
     return result
 
 
+def live(seconds: float = 14.0) -> None:
+    """``neforward run --params`` over loopback DDS, fed a pushed recording in real time at 500 Hz:
+    the wall-clock delay from sending a push's first (last) sample to receiving ~/contact true (false)."""
+    import os
+    import random
+
+    sys.path.insert(0, str(ROOT / "test"))
+    from neforward_ros.dds.loopback import write_config
+    from neforward_ros.interface import topics
+    from neforward_ros.stamps import time_message
+    from neforward_ros.wire import rostypes
+
+    from dds_peer import NodeProcess, Peer, loopback_env
+
+    name, urdf, tool = robots()[0]
+    n = 8
+    joints = sim.random_joints(n, np.random.default_rng(303))
+    with tempfile.TemporaryDirectory() as folder:
+        folder = Path(folder)
+        free = sim.simulate(sim.Arm(urdf, tool, joints, seed=304, still=(n - 1,)), 60.0)
+        sim.write(free, urdf.read_text(), folder / "free")
+        found = calibrate([folder / "free"], {})
+        from neforward_ros.calibration.params_file import params_yaml
+
+        (folder / "params.yaml").write_text(params_yaml(found.parameters))
+        pushes = sim.standard_pushes(3.0, 4.0)
+        pushed = sim.simulate(sim.Arm(urdf, tool, joints, seed=305, still=(n - 1,), pushes=pushes), seconds)
+        uri = write_config(folder).as_uri()
+        os.environ["CYCLONEDDS_URI"] = uri
+        domain = random.randint(201, 230)
+        node = NodeProcess(["--urdf", str(urdf), "--params", str(folder / "params.yaml")], folder / "node.log",
+                           loopback_env(domain, uri))  # fmt: skip
+        try:
+            peer = Peer(domain)
+            peer.writer("/joint_states", topics.JOINT_STATE_TYPE)
+            peer.reader("/neforward/contact", topics.BOOL_TYPE)
+            peer.wait_connected(node)
+            time.sleep(1.0)
+            contact: list[tuple[float, bool]] = []
+            sent = np.zeros(len(pushed.stamps))
+            start = time.monotonic()
+            for k, stamp in enumerate(pushed.stamps.tolist()):
+                delay = start + k / 500.0 - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                peer.write("/joint_states", {
+                    "header": {"stamp": time_message(stamp)}, "name": pushed.names, "position": pushed.q[k].tolist(),
+                    "velocity": pushed.qd[k].tolist(), "effort": pushed.effort[k].tolist(),
+                })  # fmt: skip
+                sent[k] = time.monotonic()
+                arrived = peer.take("/neforward/contact")
+                now = time.monotonic()
+                contact += [(now, rostypes.deserialize(topics.BOOL_TYPE, b)["data"]) for b in arrived]
+            peer.wait(0.5)
+            contact += [(time.monotonic(), rostypes.deserialize(topics.BOOL_TYPE, b)["data"])
+                        for b in peer.take("/neforward/contact")]  # fmt: skip
+        finally:
+            node.stop()
+    changes = [(t, s) for (t, s), (_, before) in zip(contact[1:], contact[:-1], strict=True) if s != before]
+    print(
+        f"\nlive over loopback DDS ({name}, 500 Hz, {len(pushes)} pushes; wall clock, the sender polling every 2 ms):"
+    )
+    for start_ns, end_ns in pushed.intervals:
+        first = int(np.searchsorted(pushed.stamps, start_ns))
+        last = int(np.searchsorted(pushed.stamps, end_ns))
+        rise = next((t for t, s in changes if s and t >= sent[first] - 0.05), None)
+        fall = next((t for t, s in changes if not s and rise is not None and t > rise), None)
+        rise_ms = (rise - sent[first]) * 1e3 if rise is not None else float("nan")
+        fall_ms = (fall - sent[last]) * 1e3 if fall is not None else float("nan")
+        print(f"  push at {(start_ns - pushed.stamps[0]) / 1e9:.1f} s: contact {rise_ms:.1f} ms after its first sample "
+              f"was sent, released {fall_ms:.1f} ms after its last (target <= 30 ms each)")  # fmt: skip
+    print(f"  contact changes: {len(changes)} (2 per push: no false contact)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one seed and two noise levels")
+    parser.add_argument("--live", action="store_true", help="also live over DDS (see the module docstring)")
+    parser.add_argument("--live-only", action="store_true", help="only live over DDS")
     args = parser.parse_args()
+    if args.live_only:
+        live()
+        return
     noises = (0.002, 0.01) if args.quick else (0.001, 0.003, 0.01)
     seeds = (101,) if args.quick else (101, 202)
     rows = []
@@ -143,6 +222,7 @@ def main() -> None:
             for seed in seeds:
                 with tempfile.TemporaryDirectory() as folder:
                     result = case(name, urdf, tool, noise, seed, Path(folder))
+                result["noise"] = noise
                 rows.append(result)
                 rises = " ".join(f"{x:5.1f}" for x in result["rises"])
                 falls = " ".join(f"{x:5.1f}" for x in result["falls"])
@@ -171,6 +251,11 @@ def main() -> None:
     print(f"Coulomb friction from 60 s of free motion: worst error {friction:.1%} over the joints whose scale was "
           f"identifiable (target <= 5 %: {'met' if friction <= 0.05 else 'NOT met'}); "
           f"{sum(r['noted'] for r in rows)} joints kept their scale")  # fmt: skip
+    for noise in noises:
+        worst = max(r["friction"] for r in rows if r["noise"] == noise)
+        print(f"  at {noise:g} rad/s of velocity noise: worst {worst:.1%}")
+    if args.live:
+        live()
 
 
 if __name__ == "__main__":

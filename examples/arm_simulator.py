@@ -75,6 +75,7 @@ class Arm:
     pauses: tuple[tuple[float, float], ...] = ()  # (start, duration) s where the motion stops
     pushes: tuple[Push, ...] = ()
     still: tuple[int, ...] = ()  # joint columns held still (a gripper)
+    payload: tuple[float, tuple[float, float, float]] | None = None  # kg, m in the tool's frame: a point mass
     seed: int = 0
 
 
@@ -180,6 +181,10 @@ def simulate(arm: Arm, seconds: float) -> Simulated:
         pin.Frame("push_point", model.frames[tool].parentJoint, tool,
                   model.frames[tool].placement * pin.SE3(np.eye(3), np.array(arm.tool_offset)), pin.FrameType.OP_FRAME)
     )  # fmt: skip
+    if arm.payload is not None:  # a point mass on the tool, which the URDF does not have
+        mass, com = arm.payload
+        frame = model.frames[tool]
+        model.appendBodyToJoint(frame.parentJoint, pin.Inertia(mass, np.array(com), np.zeros((3, 3))), frame.placement)
     data = model.createData()
     rng = np.random.default_rng(arm.seed)
     count = int(seconds * arm.rate)

@@ -148,7 +148,7 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
             "nothing could be written; partial writes the links they do not move, hold holds them)"
         )
     report.missing_joints = missing
-    return Recording(model, report, stamps, times, columns, base)
+    return Recording(settings.model_of(model), report, stamps, times, columns, base)
 
 
 def _columns(

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +33,8 @@ import numpy as np
 from neforward_ros.bag.compute import prepare_inputs, raw_states, results
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.read import Recording, read
-from neforward_ros.calibration.fit import JointFit, fit_joints, windows
+from neforward_ros.calibration.fit import JointFit, Windows, fit_joints, windows
+from neforward_ros.calibration.payload import Payload, fit_payload, payload_models
 from neforward_ros.computation.compute import ComputeState, observe_raw
 from neforward_ros.computation.observer import RawStates
 from neforward_ros.errors import InputError
@@ -66,6 +67,7 @@ class Calibration:
         method: how the node will estimate the external torques (observer or difference).
         samples: joint states fitted on.
         notes: what could not be fitted, and why.
+        payload: the payload fitted (``--payload``), or None.
     """
 
     joint_names: tuple[str, ...]
@@ -77,6 +79,7 @@ class Calibration:
     method: str
     samples: int
     notes: list[str] = field(default_factory=list)
+    payload: Payload | None = None
 
 
 def calibrate(
@@ -86,27 +89,35 @@ def calibrate(
     urdf: str | None = None,
     joint_states_topic: str | None = None,
     stribeck: bool = False,
+    payload: str | None = None,
     progress: Callable[[str, float], None] = lambda what, fraction: None,
 ) -> Calibration:
     """Fit on the recordings (see the module docstring); ``values``: node parameters given (a params
-    file, ``-p``), kept in the output and used as the prior of what the motion cannot tell.
+    file, ``-p``), kept in the output and used as the prior of what the motion cannot tell;
+    ``payload``: a link whose payload (mass, centre of mass) is fitted too (:mod:`.payload`).
 
     Raises:
         InputError: an unreadable recording, recordings of different robots, no joint state with
             every joint's position and effort.
     """
+    if payload is not None:  # the one fitted replaces any given
+        values = {k: v for k, v in values.items() if not k.startswith("payload.")}
     options = BagOptions.from_parameters(values, urdf=urdf, joint_states_topic=joint_states_topic)
+    # The recordings with the URDF's model: each computation below adds the payload its settings give.
+    plain = _options({k: v for k, v in values.items() if not k.startswith("payload.")}, urdf, joint_states_topic)
     recordings: list[Recording] = []
     for k, path in enumerate(inputs):
         progress(f"reading {k + 1}/{len(inputs)}", 0.0)
-        recording = read(Path(path), options, progress)
+        recording = read(Path(path), plain, progress)
         if recordings and recording.model.joint_names != recordings[0].model.joint_names:
             raise InputError(
                 f"{path} is of robot {recording.model.name!r} with joints {list(recording.model.joint_names)}, "
                 f"not those of {inputs[0]}"
             )
         recordings.append(recording)
-    model = recordings[0].model
+    if payload is not None and payload not in recordings[0].model.link_index:
+        raise InputError(f"--payload {payload}: robot {recordings[0].model.name!r} has no such link")
+    model = options.settings.model_of(recordings[0].model)  # with the given payload, if any
     names = model.joint_names
     prior_settings = options.settings
     prior = ComputeState.new(model, prior_settings).effort
@@ -122,8 +133,7 @@ def calibrate(
             continue
         known = np.isfinite(raw.efforts).all(axis=1)
         values_k = momentum_values(model, raw.q, raw.qd, gravity_force)
-        n = len(names)
-        parts.append((raw, values_k[:, :n], values_k[:, 2 * n :] - values_k[:, n : 2 * n], known))
+        parts.append((raw, *_split(values_k), known))
     progress("preparing", 1.0)
     if not parts:
         raise InputError("no joint state with every joint's position and effort: nothing to calibrate on")
@@ -142,10 +152,38 @@ def calibrate(
         np.concatenate(stamps), np.concatenate(momentum), np.concatenate(rest), np.concatenate(efforts),
         np.concatenate(qd), runs,
     )  # fmt: skip
-    fits = fit_joints(data, names, prior, stribeck=stribeck)
+    # A payload's torques and the effort scales trade off: with --payload the scales are the given ones
+    # (a calibration without the payload first, then this one with --params of it).
+    fits = fit_joints(data, names, prior, stribeck=stribeck, scale=payload is None)
+    found_payload = None
+    if payload is not None:
+        progress("payload", 0.0)
+        units = payload_models(model, payload)
+
+        def unit_terms(k: int) -> Windows:
+            moved = [
+                _split(
+                    momentum_values(units[k], raw.q, raw.qd, gravity_force)
+                    - momentum_values(model, raw.q, raw.qd, gravity_force)
+                )
+                for raw, *_ in parts
+            ]
+            return windows(
+                np.concatenate(stamps), np.concatenate([m[0] for m in moved]), np.concatenate([m[1] for m in moved]),
+                np.concatenate(efforts), np.concatenate(qd), runs,
+            )  # fmt: skip
+
+        found_payload, corrected = fit_payload(data, unit_terms, fits, prior, payload)
+        data = replace(data, target=corrected)
+        fits = fit_joints(data, names, prior, stribeck=stribeck, scale=False)
+        progress("payload", 1.0)
     progress("fitting", 1.0)
     fitted = dict(values)
     fitted.update(_fitted_parameters(names, fits, stribeck))
+    if found_payload is not None:
+        fitted["payload.link"] = found_payload.link
+        fitted["payload.mass"] = float(f"{found_payload.mass:.5g}")
+        fitted["payload.com"] = [float(f"{x:.4g}") for x in found_payload.com]
     fitted["publish_torques"] = True
     fitted.pop("contact.joint_names", None)
     fitted.pop("contact.thresholds", None)
@@ -192,6 +230,7 @@ def calibrate(
         method,
         sum(len(p[0]) for p in parts),
         notes,
+        found_payload,
     )
 
 
@@ -217,6 +256,12 @@ def _smoothed(qd: np.ndarray, stamps: np.ndarray, runs: list[tuple[int, int]]) -
             )
         out[start:stop] = part
     return out
+
+
+def _split(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The momentum kernel's values as (p, g - C^T qd)."""
+    n = values.shape[-1] // 3
+    return values[..., :n], values[..., 2 * n :] - values[..., n : 2 * n]
 
 
 def _options(values: Mapping[str, Any], urdf: str | None, topic: str | None) -> BagOptions:
@@ -248,18 +293,19 @@ def _external(
     out = []
     method = "difference"
     for recording, (raw, velocities) in zip(recordings, raws, strict=True):
-        state = ComputeState.new(recording.model, options.settings)
+        model = options.settings.model_of(recording.model)
+        state = ComputeState.new(model, options.settings)
         if state.observer is not None:
             state.decide(bool(velocities))
         if state.method == "observer":
             method = "observer"
             if raw is not None:
-                observed = observe_raw(recording.model, options.settings, raw, state)
+                observed = observe_raw(model, options.settings, raw, state)
                 assert observed is not None
                 out.append(observed.external)
             continue
         inputs = prepare_inputs(recording, options, lambda what, fraction: None)
-        for result, _, _ in results(recording.model, inputs, options, [], state):
+        for result, _, _ in results(model, inputs, options, [], state):
             if result is not None and result.dynamics is not None:
                 out.append(result.dynamics.external)
     if not out:

@@ -28,6 +28,9 @@ def add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
         "-p", "--param", action="append", default=[], metavar="NAME:=VALUE", help="a node parameter, as --params"
     )
     parser.add_argument("--stribeck", action="store_true", help="also fit a Stribeck term per joint")
+    parser.add_argument(
+        "--payload", metavar="LINK", help="also fit the mass and centre of mass of a payload on this link (payload.*)"
+    )
 
 
 def run_calibrate(args: argparse.Namespace) -> int:
@@ -51,6 +54,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
         urdf=args.urdf,
         joint_states_topic=args.joint_states,
         stribeck=args.stribeck,
+        payload=args.payload,
         progress=Progress(),
     )
     text = params_yaml(found.parameters, header=_header(found, args.inputs))
@@ -89,6 +93,15 @@ def describe(found: Calibration, output: Path) -> str:
         f"(RMS: the external torque in this free motion, N m (N), with the given parameters and with the fitted "
         f"ones; threshold: {THRESHOLD_MARGIN:g} x its largest)"
     )
+    if found.payload is not None:
+        p = found.payload
+        if p.mass > 0:
+            rows.append(
+                f"payload on {p.link}: {p.mass:.3f} kg at ({p.com[0]:.3f}, {p.com[1]:.3f}, {p.com[2]:.3f}) m in its "
+                f"frame (the fit's residual {p.residual_without:.3g} -> {p.residual:.3g} N m RMS)"
+            )
+        else:
+            rows.append(f"payload on {p.link}: none found (the best mass was under 0.02 kg)")
     rows += [f"warning: {note}" for note in found.notes]
     rows.append(f"wrote {output}")
     return "\n".join(rows)

@@ -153,18 +153,21 @@ class JointFit:
     residual_before: float = float("nan")
     residual_after: float = float("nan")
     notes: list[str] = field(default_factory=list)
+    fitted: tuple[str, ...] = ()  # which of scale, coulomb, viscous, stribeck were fitted (the offset always is)
 
 
-def fit_joints(data: Windows, names: Sequence[str], prior: EffortModel, stribeck: bool = False) -> list[JointFit]:
+def fit_joints(
+    data: Windows, names: Sequence[str], prior: EffortModel, stribeck: bool = False, scale: bool = True
+) -> list[JointFit]:
     """Each joint's parameters (see the module docstring); ``prior``: the values kept where the motion
-    does not tell (and the residual before)."""
+    does not tell (and the residual before); ``scale`` False keeps every scale at the prior's."""
     fits = []
     for j, name in enumerate(names):
-        fits.append(_fit_joint(data, j, name, prior, stribeck))
+        fits.append(_fit_joint(data, j, name, prior, stribeck, scale))
     return fits
 
 
-def _fit_joint(data: Windows, j: int, name: str, prior: EffortModel, stribeck: bool) -> JointFit:
+def _fit_joint(data: Windows, j: int, name: str, prior: EffortModel, stribeck: bool, scale: bool) -> JointFit:
     y = data.target[:, j]
     effort = data.effort[:, j]
     velocity = data.velocity[:, j]
@@ -173,7 +176,7 @@ def _fit_joint(data: Windows, j: int, name: str, prior: EffortModel, stribeck: b
     sign_prior, _ = data.shapes(j, float(prior.velocity_scale[j]))
     before = prior.scale[j] * effort + prior.offset[j] - prior.coulomb[j] * sign_prior - prior.viscous[j] * velocity
     fit.residual_before = float(np.sqrt(np.mean(np.square(y - before))))
-    free = {"scale": True, "coulomb": True, "viscous": True, "stribeck": stribeck}
+    free = {"scale": scale, "coulomb": True, "viscous": True, "stribeck": stribeck}
     del speeds  # the windows' means, not the noisy samples, tell whether a joint moved
     threshold = REVERSAL_SPEED
     forwards, backwards = float(np.mean(velocity > threshold)), float(np.mean(velocity < -threshold))
@@ -239,6 +242,7 @@ def _fit_joint(data: Windows, j: int, name: str, prior: EffortModel, stribeck: b
         solved = attempt(velocity_scale)
         assert solved is not None
         residual, values = solved
+    fit.fitted = tuple(k for k in ("scale", "coulomb", "viscous", "stribeck") if free[k])
     fit.scale, fit.offset = values["scale"], values["offset"]
     fit.coulomb, fit.viscous, fit.stribeck = values["coulomb"], values["viscous"], values["stribeck"]
     fit.velocity_scale = velocity_scale

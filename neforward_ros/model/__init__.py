@@ -7,9 +7,11 @@ computation shares.
 - :mod:`.urdf`: the links and joints of a URDF, by urdfdom's rules.
 - :mod:`.build`: the checked tree, its root and joint columns; what is refused, what is warned.
 - :mod:`.load`: :func:`load_model`.
+- :mod:`.payload`: :func:`with_payload`, a point mass the URDF does not have.
 """
 
 from neforward_ros.model.load import description_text, load_model
+from neforward_ros.model.payload import with_payload
 from neforward_ros.model.types import JointKind, Mat3, ParentJoint, RobotModel, Vec3
 
-__all__ = ["JointKind", "Mat3", "ParentJoint", "RobotModel", "Vec3", "description_text", "load_model"]
+__all__ = ["JointKind", "Mat3", "ParentJoint", "RobotModel", "Vec3", "description_text", "load_model", "with_payload"]

@@ -72,9 +72,7 @@ class Pipeline:
             if not is_token(link):
                 raise ModelError(f"link {link!r} cannot be part of a ROS 2 topic name (letters, digits, _)")
         if settings.robot_description:
-            self.set_model(
-                load_model(settings.robot_description, root_link=settings.root_link, log=log), "parameter"
-            )
+            self.set_model(load_model(settings.robot_description, root_link=settings.root_link, log=log), "parameter")
         else:
             self._log.once(
                 "waiting",
@@ -97,14 +95,15 @@ class Pipeline:
         return True
 
     def set_model(self, model: RobotModel, source: str = "caller") -> None:
-        """Use ``model`` from now on; joint histories restart."""
+        """Use ``model`` from now on (with the ``payload.*`` point mass); joint histories restart."""
         settings = self.settings
+        model = settings.model_of(model)
         missing = [link for link in settings.named_links if link not in model.link_index]
         if missing:
             self._log.log(
                 logging.ERROR,
-                f"accel_links/imu_links/wrench_links/contact.link name links that robot {model.name!r} does not have: "
-                f"{', '.join(missing)}; nothing is published for them",
+                f"accel_links/imu_links/wrench_links/contact.link/payload.link name links that robot {model.name!r} "
+                f"does not have: {', '.join(missing)}; nothing is published for them (or no payload is added)",
             )
         for parameter, names in settings.named_joints:
             unknown = [name for name in names if name not in model.joint_index]

@@ -12,6 +12,7 @@ from neforward_ros.estimation.motion import KalmanSettings
 from neforward_ros.estimation.settings import METHODS, MODES, VELOCITY_SOURCES, StreamSettings
 from neforward_ros.kinematics.effort_model import DEFAULT_STRIBECK_VELOCITY, DEFAULT_VELOCITY_SCALE
 from neforward_ros.kinematics.forward import DEFAULT_GRAVITY
+from neforward_ros.model import RobotModel, with_payload
 from neforward_ros.parameters.qos_overrides import QOS_OVERRIDES, QosOverride, qos_overrides
 from neforward_ros.parameters.table import (
     ACCELERATION_SOURCES,
@@ -47,6 +48,7 @@ class NodeSettings:
         external_method: "auto", "observer" or "difference".
         observer_gain: 1/s; observer_gains: joint name -> its own gain.
         velocity_cutoff: Hz, the observer's velocity low-pass (0: none).
+        payload: (link, mass kg, centre of mass in the link frame m), or None.
         wrench_links: links with ~/<link>/wrench.
         contact_thresholds: joint name -> |external torque| threshold; empty: no ~/contact.
         contact_debounce: s.
@@ -80,6 +82,7 @@ class NodeSettings:
     observer_gain: float = DEFAULT_OBSERVER_GAIN
     observer_gains: Mapping[str, float] = field(default_factory=dict)
     velocity_cutoff: float = DEFAULT_VELOCITY_CUTOFF
+    payload: tuple[str, float, tuple[float, float, float]] | None = None
     wrench_links: tuple[str, ...] = ()
     contact_thresholds: Mapping[str, float] = field(default_factory=dict)
     contact_debounce: float = 0.02
@@ -113,7 +116,8 @@ class NodeSettings:
         """The links that accel_links, imu_links, wrench_links and contact.link name (each must be the
         model's)."""
         contact = (self.contact_link,) if self.contact_link else ()
-        return (*self.accel_links, *self.imu_links, *self.wrench_links, *contact)
+        payload = (self.payload[0],) if self.payload else ()
+        return (*self.accel_links, *self.imu_links, *self.wrench_links, *contact, *payload)
 
     @property
     def named_joints(self) -> tuple[tuple[str, Mapping[str, float]], ...]:
@@ -126,6 +130,13 @@ class NodeSettings:
             ("friction.joint_names", self.friction.get("coulomb", {})),
             ("external_torques.joint_names", self.observer_gains),
         )
+
+    def model_of(self, model: RobotModel) -> RobotModel:
+        """The model the computation uses: the URDF's, with ``payload.*``'s point mass when given (and
+        its link is the model's; the callers report one that is not)."""
+        if self.payload is None or self.payload[0] not in model.link_index:
+            return model
+        return with_payload(model, *self.payload)
 
     def qos_override(self, topic: str, entity: str) -> QosOverride:
         """The overrides for a fully qualified topic's ``publisher`` or ``subscription``."""
@@ -190,6 +201,12 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
     for field_name in ("velocity_scale", "stribeck_velocity"):
         if any(not v > 0.0 for v in friction[field_name].values()):
             raise InputError(f"parameter friction.{field_name} must hold positive numbers")
+    payload = None
+    if merged["payload.link"]:
+        com = merged["payload.com"]
+        if len(com) != 3 or not merged["payload.mass"] >= 0.0:
+            raise InputError("parameters payload.mass (kg, >= 0) and payload.com (x, y, z in m) describe the payload")
+        payload = (merged["payload.link"], merged["payload.mass"], (float(com[0]), float(com[1]), float(com[2])))
     observer_gains = _per_joint(merged, "external_torques.joint_names", "external_torques.gains")
     if not merged["external_torques.gain"] > 0.0 or any(not v > 0.0 for v in observer_gains.values()):
         raise InputError("parameters external_torques.gain and external_torques.gains must be positive (1/s)")
@@ -237,6 +254,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         effort_scale=effort_scale,
         effort_offset=effort_offset,
         friction=friction,
+        payload=payload,
         external_method=merged["external_torques.method"],
         observer_gain=merged["external_torques.gain"],
         observer_gains=observer_gains,
