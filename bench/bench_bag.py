@@ -7,7 +7,8 @@ estimation, recursion, writing link_states and com_states to a new MCAP recordin
 their ratio; then (c) the whole command as users run it, in its own process, process start and
 imports included, against the same in-process peer: warm, with the cache of an earlier run on the
 URDF (compiled kernels, message-type facts; target at most 2), and cold, with an empty cache (target
-at most 3). Interleaved repeats; medians.
+at most 3). Python's bytecode cache is on for the command, as in any install. Interleaved repeats;
+medians.
 
 Usage: python bench/bench_bag.py [--seconds 60] [--repeats 3]
 """
@@ -74,7 +75,10 @@ def neforward_bag(path: Path, output: Path) -> float:
 def neforward_command(path: Path, output: Path, cache: Path) -> float:
     """The whole command as a user runs it, process start included, with the model cache at ``cache``."""
     shutil.rmtree(output, ignore_errors=True)
-    environment = {**os.environ, "NEFORWARD_CACHE": str(cache)}
+    # Python's bytecode cache on, as in an install (pip compiles it; colcon too): this machine's shell
+    # may turn it off (PYTHONDONTWRITEBYTECODE), which would time the compilation of every module.
+    environment = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    environment["NEFORWARD_CACHE"] = str(cache)
     command = [
         str(Path(sys.executable).with_name("neforward")),
         "bag",

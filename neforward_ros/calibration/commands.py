@@ -6,14 +6,12 @@ import argparse
 import os
 import signal
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from neforward_ros.bag.report import Progress
-from neforward_ros.calibration.calibrate import THRESHOLD_MARGIN, Calibration, calibrate
-from neforward_ros.calibration.params_file import params_yaml
 from neforward_ros.errors import InputError
+
+if TYPE_CHECKING:  # imported when the command runs: the command line of every command builds this parser
+    from neforward_ros.calibration.calibrate import Calibration
 
 
 def add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,6 +33,9 @@ def add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run_calibrate(args: argparse.Namespace) -> int:
     """Calibrate, print the report, write the params file (all at once: nothing after Ctrl-C)."""
+    from neforward_ros.bag.report import Progress
+    from neforward_ros.calibration.calibrate import calibrate
+    from neforward_ros.calibration.params_file import params_yaml
     from neforward_ros.parameters.files import command_line_parameters, load_params_file
 
     output = Path(args.output)
@@ -79,6 +80,8 @@ def run_calibrate(args: argparse.Namespace) -> int:
 def describe(found: Calibration, output: Path) -> str:
     """The report: each joint's fitted parameters, its external torque RMS before and after, and its
     contact threshold; then what could not be fitted."""
+    from neforward_ros.calibration.calibrate import THRESHOLD_MARGIN
+
     rows = [
         f"calibrated on {found.samples} joint states; external torques by the {found.method}",
         f"{'joint':<24}{'scale':>8}{'offset':>9}{'coulomb':>9}{'viscous':>9}{'v_scale':>9}"
@@ -108,7 +111,7 @@ def describe(found: Calibration, output: Path) -> str:
 
 
 def _header(found: Calibration, inputs: list[str]) -> str:
-    worst = float(np.nanmax(found.after)) if len(found.after) else float("nan")
+    worst = float(max(found.after)) if len(found.after) else float("nan")
     return (
         f"Written by neforward calibrate from {', '.join(inputs)}: {found.samples} joint states of free motion.\n"
         f"External torques by the {found.method}; the largest RMS left in that motion: {worst:.3g} N m.\n"
