@@ -234,6 +234,7 @@ def _whole(
             method=batch.method,
             window=batch.window,
             order=batch.order,
+            adaptive=batch.adaptive,
         )
         stale = _gap_to_samples(t, target_s) > settings.estimator.max_gap
         silent[:, joints] = stale[:, None]

@@ -64,7 +64,9 @@ class BagOptions:
         at a centred fixed lag; also what a moving base's topic is differentiated with."""
         estimator = self.settings.estimator
         method = estimator.method if estimator.method in ("polyfit", "difference") else "polyfit"
-        return StreamSettings(method=method, window=estimator.window, order=estimator.order)
+        return StreamSettings(
+            method=method, window=estimator.window, order=estimator.order, adaptive=estimator.adaptive
+        )
 
     @property
     def dynamics_needed(self) -> bool:

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from neforward_ros.errors import InputError
+from neforward_ros.estimation.adaptive import adaptive_fits
 from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW, check_settings, local_polynomial
 from neforward_ros.stamps import relative_seconds
 
@@ -26,6 +27,7 @@ def estimate_derivatives(
     window: float = DEFAULT_WINDOW,
     order: int = DEFAULT_ORDER,
     wrap: Sequence[bool] | None = None,
+    adaptive: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Velocities and accelerations of a whole recording of positions (non-causal).
 
@@ -38,6 +40,9 @@ def estimate_derivatives(
         order: degree of the local polynomial (polyfit), at least 2.
         wrap: per column, True for a continuous joint whose positions wrap at +-pi; those
             columns are unwrapped before differentiating.
+        adaptive: polyfit: each column's window chosen per sample, up to ``window``, by the
+            intersection-of-confidence-intervals rule (:mod:`neforward_ros.estimation.adaptive`),
+            as the node's default; False: always ``window``.
 
     Returns:
         (qd, qdd), each with q's shape, in units per second and per second squared.
@@ -75,6 +80,8 @@ def estimate_derivatives(
     if method == "difference":
         qd = np.gradient(positions, seconds, axis=0, edge_order=2)
         qdd = np.gradient(qd, seconds, axis=0, edge_order=2)
+    elif adaptive:
+        _, qd, qdd, _ = adaptive_fits(seconds, positions, seconds, window / 2.0, order, window / 2.0)
     else:
         _, qd, qdd = local_polynomial(seconds, positions, seconds, window / 2.0, order)
     if one_dimensional:
@@ -91,6 +98,7 @@ def estimate_at(
     method: str = "polyfit",
     window: float = DEFAULT_WINDOW,
     order: int = DEFAULT_ORDER,
+    adaptive: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Positions, velocities and accelerations at arbitrary target times, non-causal.
 
@@ -105,6 +113,8 @@ def estimate_at(
         velocity: measured velocities (T, m), or None to differentiate positions; when given, the
             acceleration is the derivative of velocity.
         method, window, order: as for :func:`estimate_derivatives`.
+        adaptive: polyfit: each column's window chosen per target, up to ``window``, as the
+            streaming estimator's (:mod:`neforward_ros.estimation.adaptive`).
 
     Returns:
         three (M, m) arrays.
@@ -117,6 +127,13 @@ def estimate_at(
         d2 = np.gradient(d1, t, axis=0, edge_order=2)
         columns = range(q.shape[1])
         q_at, qd_at, qdd_at = (np.stack([np.interp(targets, t, x[:, c]) for c in columns], axis=1) for x in (q, d1, d2))
+    elif adaptive:
+        half_width = window / 2.0
+        if velocity is None:
+            q_at, qd_at, qdd_at, _ = adaptive_fits(t, q, targets, half_width, order, half_width)
+        else:  # the window chosen on the velocities, whose derivative is the acceleration
+            q_at, _, _, _ = adaptive_fits(t, q, targets, half_width, order, half_width)
+            qd_at, qdd_at, _, _ = adaptive_fits(t, velocity, targets, half_width, order, half_width, derivative=1)
     else:
         half_width = window / 2.0
         q_at, qd_at, qdd_at = local_polynomial(t, q, targets, half_width, order)

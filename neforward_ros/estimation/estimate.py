@@ -27,6 +27,9 @@ class JointEstimate:
         efforts: the efforts the messages carried (N m or N), at the stamp: a sample's own at its
             stamp, else interpolated between the samples around it; NaN where there are none. None
             when not known at all (supplied states without efforts).
+        acceleration_std: the estimate's own standard deviation of each acceleration (from the
+            noise read from the samples, the fit's or the filter's), rad/s^2 (m/s^2); NaN where the
+            estimator does not give one; None when not known at all.
     """
 
     stamp_ns: int
@@ -37,6 +40,7 @@ class JointEstimate:
     ages: np.ndarray
     ready: np.ndarray
     efforts: np.ndarray | None = None
+    acceleration_std: np.ndarray | None = None
 
     @property
     def all_ready(self) -> bool:

@@ -48,6 +48,22 @@ def local_polynomial(
     Returns:
         three arrays of shape (M, n).
     """
+    fits = polynomial_fits(t, y, targets, half_width, order, lead)
+    return fits[0], fits[1], fits[2]
+
+
+def polynomial_fits(
+    t: np.ndarray,
+    y: np.ndarray,
+    targets: np.ndarray,
+    half_width: float,
+    order: int,
+    lead: float | None = None,
+    variance: bool = False,
+) -> tuple[np.ndarray, ...]:
+    """:func:`local_polynomial`'s value, first and second derivative; with ``variance``, also each
+    target's variance factors of the first and second derivative for unit white noise (M,) and its
+    window's sample count (M,)."""
     lead = half_width if lead is None else lead
     count = len(t)
     degree = min(order, count - 1)
@@ -61,6 +77,7 @@ def local_polynomial(
         hi[short] = lo[short] + needed
     width = int(np.max(hi - lo))
     value, d1, d2 = (np.empty((len(targets), y.shape[1])) for _ in range(3))
+    var1, var2 = np.empty(len(targets)), np.empty(len(targets))
     for start in range(0, len(targets), _CHUNK):
         block = slice(start, start + _CHUNK)
         index = lo[block, None] + np.arange(width)
@@ -77,7 +94,13 @@ def local_polynomial(
         value[block] = coefficients[:, 0]
         d1[block] = coefficients[:, 1] / half_width
         d2[block] = 2.0 * coefficients[:, 2] / half_width**2 if degree >= 2 else 0.0
-    return value, d1, d2
+        if variance:
+            inverse = np.linalg.inv(gram)
+            var1[block] = inverse[:, 1, 1] / half_width**2
+            var2[block] = 4.0 * inverse[:, 2, 2] / half_width**4 if degree >= 2 else np.inf
+    if not variance:
+        return value, d1, d2
+    return value, d1, d2, var1, var2, (hi - lo).astype(float)
 
 
 def check_settings(method: str, window: float, order: int) -> None:
@@ -108,14 +131,20 @@ def fit_at(
 
 
 def fit_window(
-    times: np.ndarray, values: np.ndarray, target_s: float, half_width: float, order: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The fit of :func:`fit_at` on exactly the samples given (at least order + 1 of them)."""
+    times: np.ndarray, values: np.ndarray, target_s: float, half_width: float, order: int, variance: bool = False
+) -> tuple[np.ndarray, ...]:
+    """The fit of :func:`fit_at` on exactly the samples given (at least order + 1 of them); with
+    ``variance``, also the variance factors of the first and second derivative for unit white noise."""
     tau = (times - target_s) / half_width
     basis = np.vander(tau, order + 1, increasing=True)  # powers by repeated products, as local_polynomial
     transposed = basis.T
-    coefficients = np.linalg.solve(transposed @ basis, transposed @ values)
-    return coefficients[0], coefficients[1] / half_width, 2.0 * coefficients[2] / half_width**2
+    gram = transposed @ basis
+    coefficients = np.linalg.solve(gram, transposed @ values)
+    out = coefficients[0], coefficients[1] / half_width, 2.0 * coefficients[2] / half_width**2
+    if not variance:
+        return out
+    inverse = np.linalg.inv(gram)
+    return (*out, inverse[1, 1] / half_width**2, 4.0 * inverse[2, 2] / half_width**4)
 
 
 def local_difference(

@@ -6,7 +6,7 @@ from collections import deque
 
 import numpy as np
 
-from neforward_ros.estimation.kalman import KalmanTrack
+from neforward_ros.estimation.kalman_bank import KalmanBank
 from neforward_ros.stamps import NS
 
 
@@ -38,7 +38,7 @@ class JointHistory:
         "warming",
     )
 
-    def __init__(self, joints: list[int], origin: int, capacity: int = 256, track: KalmanTrack | None = None) -> None:
+    def __init__(self, joints: list[int], origin: int, capacity: int = 256, track: KalmanBank | None = None) -> None:
         self.joints = joints
         self.track = track
         self.holes: list[int] = []  # stamps of samples more than the support's max_hole after the previous one

@@ -20,6 +20,8 @@ import numpy as np
 from neforward_ros.estimation.motion import MotionModel
 from neforward_ros.stamps import NS
 
+_LOG_2PI = float(np.log(2.0 * np.pi))
+
 
 @dataclass
 class _Step:
@@ -47,10 +49,14 @@ class KalmanTrack:
         self.steps: deque[_Step] = deque()
         self._noise = model.settings.noise**2
         self._velocity_noise = model.settings.velocity_noise**2
+        self.nis = np.ones(0)
+        """Each joint's normalised innovation squared at the last sample, per measured dimension
+        (1 on average when the model fits the motion and the noise)."""
 
-    def add(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> None:
+    def add(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> np.ndarray:
         """One sample of every joint: positions (m,), velocities (m,), NaN where not measured.
-        Velocities are used when every joint has one."""
+        Velocities are used when every joint has one. Returns each joint's log-likelihood of the
+        sample under the prediction (m,): 0 for the first sample."""
         model = self.model
         if not self.steps:
             state = np.zeros((model.dim, len(positions)))
@@ -65,20 +71,35 @@ class KalmanTrack:
             if self.smooth:
                 last.gain = np.linalg.solve(covariance, transition @ last.covariance).T
             predicted = state
+        first = not self.steps
         if np.isfinite(velocities).all():
             rows = np.stack([model.position_row, model.velocity_row])
             projected = rows @ covariance  # (2, dim)
             innovation_covariance = projected @ rows.T + np.diag([self._noise, self._velocity_noise])
             gain = np.linalg.solve(innovation_covariance, projected).T  # (dim, 2)
-            state = state + gain @ (np.stack([positions, velocities]) - rows @ state)
+            innovation = np.stack([positions, velocities]) - rows @ state
+            state = state + gain @ innovation
             covariance = covariance - gain @ projected
+            weighted = np.linalg.solve(innovation_covariance, innovation)
+            squared = np.sum(innovation * weighted, axis=0)
+            log_det = float(np.log(np.linalg.det(innovation_covariance)))
+            likelihood = -0.5 * (squared + log_det + 2.0 * _LOG_2PI)
+            self.nis = squared / 2.0
         else:  # the position (c + g, states 0 and 3) alone: scalar innovation
             projected = covariance[0] + covariance[3]
-            gain = projected / (projected[0] + projected[3] + self._noise)
-            state = state + np.outer(gain, positions - state[0] - state[3])
+            variance = projected[0] + projected[3] + self._noise
+            gain = projected / variance
+            innovation = positions - state[0] - state[3]
+            state = state + np.outer(gain, innovation)
             covariance = covariance - np.outer(gain, projected)
+            likelihood = -0.5 * (innovation**2 / variance + np.log(variance) + _LOG_2PI)
+            self.nis = innovation**2 / variance
         covariance = 0.5 * (covariance + covariance.T)
         self.steps.append(_Step(stamp, state, predicted, covariance))
+        if first:
+            self.nis = np.ones(len(positions))
+            return np.zeros(len(positions))
+        return likelihood
 
     def estimate(self, target: int) -> np.ndarray:
         """(3, m) position, velocity and acceleration at the target stamp: smoothed over every step kept
@@ -99,6 +120,12 @@ class KalmanTrack:
             state = transition @ state
         return self.model.readout @ state
 
+    def acceleration_variance(self) -> float:
+        """The acceleration's variance at the newest sample (the filter's; the same for every joint
+        of the group)."""
+        row = self.model.readout[2]
+        return float(row @ self.steps[-1].covariance @ row)
+
     def forget_before(self, stamp: int) -> None:
         """Drop the steps no later estimate needs: all before the newest step at or before ``stamp``."""
         steps = self.steps
@@ -108,6 +135,7 @@ class KalmanTrack:
     def select(self, columns: list[int]) -> KalmanTrack:
         """A track of these state columns only, with the same history."""
         track = KalmanTrack(self.model, self.smooth)
+        track._noise, track._velocity_noise = self._noise, self._velocity_noise
         for step in self.steps:
             track.steps.append(
                 _Step(step.stamp, step.filtered[:, columns], step.predicted[:, columns], step.covariance, step.gain)

@@ -44,23 +44,32 @@ class KalmanSettings:
 
     Attributes:
         noise: standard deviation of the position measurements, rad (m for prismatic joints):
-            encoder noise, or quantisation step / sqrt(12).
-        velocity_noise: standard deviation of the velocities a message carries, rad/s (m/s).
-        length_scale: s; the motion's spectrum falls off above about 1 / (2 length_scale) Hz. Set it
-            to about 0.65 / (the highest frequency of the joints' motion, Hz).
+            encoder noise, or quantisation step / sqrt(12); 0 (the default): read from the samples
+            (:mod:`.kalman_bank`).
+        velocity_noise: standard deviation of the velocities a message carries, rad/s (m/s); 0 (the
+            default): read from them.
+        length_scale: s; the motion's spectrum falls off above about 1 / (2 length_scale) Hz: about
+            0.65 / (the highest frequency of the joints' motion, Hz); 0 (the default): a bank of
+            models, mixed by how well each predicts each joint (:mod:`.kalman_bank`).
         magnitude: typical excursion of the motion around its trend, rad (m).
     """
 
-    noise: float = 1e-4
-    velocity_noise: float = 1e-3
-    length_scale: float = 0.4
+    noise: float = 0.0
+    velocity_noise: float = 0.0
+    length_scale: float = 0.0
     magnitude: float = 0.3
 
     def __post_init__(self) -> None:
         for name in ("noise", "velocity_noise", "length_scale", "magnitude"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (0.0 < value < math.inf):
-                raise InputError(f"kalman {name} must be a positive number, got {value!r}")
+            automatic = name != "magnitude" and value == 0
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not (0.0 < value < math.inf or automatic)
+            ):
+                alternative = " or 0 (from the data)" if name != "magnitude" else ""
+                raise InputError(f"kalman {name} must be a positive number{alternative}, got {value!r}")
 
 
 class MotionModel:

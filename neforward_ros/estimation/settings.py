@@ -31,6 +31,8 @@ class StreamSettings:
         window: polyfit: full width of the local fit, s. kalman: the stretch of recent samples an
             estimate needs before its stamp (its warm-up), s.
         order: polynomial degree (polyfit).
+        adaptive: polyfit: each joint's window chosen per estimate, up to ``window``, by the
+            intersection-of-confidence-intervals rule (:mod:`.adaptive`); False: always ``window``.
         mode: ``"causal"``: each estimate refers to the newest sample (lowest latency).
             ``"fixed_lag"``: each estimate refers to the sample ``lag`` seconds before the newest and
             is stamped with that sample's stamp.
@@ -48,6 +50,7 @@ class StreamSettings:
     method: str = "polyfit"
     window: float = DEFAULT_WINDOW
     order: int = DEFAULT_ORDER
+    adaptive: bool = True
     mode: str = "fixed_lag"
     lag: float | None = None
     max_gap: float = DEFAULT_MAX_GAP
@@ -89,7 +92,10 @@ class StreamSettings:
                 f"warm-up {self.window:g} s)"
             )
         elif self.method == "polyfit":
-            what = f"polyfit (window {self.window:g} s, degree {self.order})"
+            size = (
+                f"windows up to {self.window:g} s, chosen per joint" if self.adaptive else f"window {self.window:g} s"
+            )
+            what = f"polyfit ({size}, degree {self.order})"
         else:
             what = f"difference (window {self.window:g} s)"
         lag = self.effective_lag

@@ -21,17 +21,24 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from neforward_ros.errors import InputError
+from neforward_ros.estimation.adaptive import adaptive_fit
 from neforward_ros.estimation.coverage import uncovered
 from neforward_ros.estimation.estimate import JointEstimate
 from neforward_ros.estimation.fit import fit_window, local_difference
 from neforward_ros.estimation.history import JointHistory
 from neforward_ros.estimation.joint_messages import JointMessageReader, Sample
-from neforward_ros.estimation.kalman import KalmanTrack
-from neforward_ros.estimation.motion import MotionModel
+from neforward_ros.estimation.kalman_bank import LENGTH_SCALES, KalmanBank
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.timeline import RESTART, Timeline
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.stamps import NS
+
+STRAIN_MEMORY = 0.02
+"""The weight of each new estimate in the consistency checks' averages (about the last 50)."""
+STRAIN_LIMIT = 0.5
+"""polyfit: the share of estimates at the smallest window above which a joint is said to strain."""
+INNOVATION_LIMIT = 5.0
+"""kalman: how far the normalised innovations may average from 1 (above or below) before it is said."""
 
 __all__ = ["RESTART", "JointEstimate", "StreamSettings", "StreamingEstimator"]
 
@@ -87,10 +94,16 @@ class StreamingEstimator:
         self._window_ns = round(self.settings.window * NS)
         self._support = self.settings.support
         self._hole_ns = self._support.ns()[2]
-        self._motion = MotionModel(self.settings.kalman) if self.settings.method == "kalman" else None
+        self._kalman = self.settings.method == "kalman"
         self._keep_ns = round((self.settings.window + self.settings.effective_lag) * NS) + self._gap_ns
         self._pending: deque[int] = deque()
         self._intervals: deque[int] = deque(maxlen=8)  # the last stamp intervals, ns
+        # Per joint, how hard the estimator strains (see _watch_windows, _watch_innovations).
+        self._strain = np.zeros(len(self.joint_names))
+        self._innovations = np.ones(len(self.joint_names))
+        self._watched = np.zeros(len(self.joint_names), dtype=int)
+        self._noise_memory: dict[int, tuple[float | None, float | None]] = {}  # kalman: per joint, as read
+        self._score_memory: dict[int, np.ndarray] = {}  # kalman: per joint, its models' last log-weights
         self._clock: int | None = None
         self._origin = 0
         self.segment = 0
@@ -252,8 +265,19 @@ class StreamingEstimator:
                 group = self._split(group, [j for j in group.joints if j in values])
             columns = [values[j] for j in group.joints]
             group.append(stamp, *(list(x) for x in zip(*columns, strict=True)), self._hole_ns)
+            self._watch_innovations(group)
         if fresh:
-            track = KalmanTrack(self._motion, smooth=self._lag_ns > 0) if self._motion is not None else None
+            track = None
+            if self._kalman:  # what was read of the noise before a restart serves until it is read again
+                known = [self._noise_memory.get(j) for j in sorted(fresh)]
+                noise = tuple(
+                    max(v[i] for v in known) if all(v is not None and v[i] is not None for v in known) else None
+                    for i in range(2)
+                )
+                scores = [self._score_memory.get(j) for j in sorted(fresh)]
+                seeded = np.stack(scores, axis=1) if all(x is not None for x in scores) else None
+                track = KalmanBank(self.settings.kalman, smooth=self._lag_ns > 0, known_noise=noise,
+                                   known_scores=seeded)  # fmt: skip
             group = JointHistory(sorted(fresh), self._origin, track=track)
             self._groups.append(group)
             for j in group.joints:
@@ -286,7 +310,7 @@ class StreamingEstimator:
 
     def _estimate(self, target: int) -> JointEstimate:
         n = len(self.joint_names)
-        state = np.full((n, 4), np.nan)  # position, velocity, acceleration, effort
+        state = np.full((n, 5), np.nan)  # position, velocity, acceleration, effort, acceleration's std
         ages = np.full(n, np.inf)
         for group in self._groups:
             self._estimate_group(target, group, state, ages)
@@ -295,7 +319,10 @@ class StreamingEstimator:
         ready = np.isfinite(state[:, :3]).all(axis=1)
         if not ready.all():
             state[~ready, :3] = np.nan
-        return JointEstimate(target, self.segment, state[:, 0], state[:, 1], state[:, 2], ages, ready, state[:, 3])
+            state[~ready, 4] = np.nan
+        return JointEstimate(
+            target, self.segment, state[:, 0], state[:, 1], state[:, 2], ages, ready, state[:, 3], state[:, 4]
+        )
 
     def _estimate_group(self, target: int, group: JointHistory, state: np.ndarray, ages: np.ndarray) -> None:
         """Fill state (n, 3) and ages (n,) at the target for one group's joints, if its samples cover
@@ -325,16 +352,21 @@ class StreamingEstimator:
         exact = age_ns == 0  # the target is a sample of this group: its own position is used as it is
         if group.track is not None:
             position, velocity, acceleration = group.track.estimate(target)
+            state[members, 4] = group.track.acceleration_std()
         else:
-            position, velocity, acceleration = self._fit(target, group, exact)
+            position, velocity, acceleration, spread = self._fit(target, group, exact)
+            state[members, 4] = spread
         if exact:
             position = group.positions[k]
             given = group.velocities[k]
             velocity = np.where(np.isfinite(given), given, velocity)  # a message velocity is kept as given
         state[members, 0], state[members, 1], state[members, 2] = position, velocity, acceleration
 
-    def _fit(self, target: int, group: JointHistory, exact: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """polyfit or difference over the support's samples (covered): position, velocity, acceleration."""
+    def _fit(
+        self, target: int, group: JointHistory, exact: bool
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """polyfit or difference over the support's samples (covered): position, velocity,
+        acceleration, and the acceleration's standard deviation (NaN where not known)."""
         settings = self.settings
         stamps = group.stamps
         lead_ns = self._lag_ns
@@ -354,18 +386,94 @@ class StreamingEstimator:
             values = np.concatenate([positions, velocities[:, by_velocity]], axis=1)
         else:
             values = positions
+        m = len(group.joints)
+        spread = np.full(values.shape[1], np.nan)
         if settings.method == "difference":
             fitted, d1, d2 = local_difference(times, values, target_s, lead_ns / NS)
+        elif settings.adaptive:
+            derivative = np.full(values.shape[1], 2)
+            if fitted_velocities and exact:
+                derivative = np.where(by_velocity, 1, 2)
+            elif fitted_velocities:
+                derivative[m:] = 1
+            fitted, d1, d2, spread, smallest = adaptive_fit(
+                times, values, target_s, settings.window / 2.0, settings.order, lead_ns / NS, derivative
+            )
+            joint_smallest = smallest[:m].copy()
+            if fitted_velocities and not exact:  # the acceleration of those joints: their velocities' fit's
+                joint_smallest[by_velocity] = smallest[m:]
+            self._watch_windows(group, joint_smallest)
         else:
             fitted, d1, d2 = fit_window(times, values, target_s, settings.window / 2.0, settings.order)
-        m = len(group.joints)
         if fitted_velocities and exact:
-            return fitted, np.where(by_velocity, fitted, d1), np.where(by_velocity, d1, d2)
+            return fitted, np.where(by_velocity, fitted, d1), np.where(by_velocity, d1, d2), spread
         velocity, acceleration = d1[:m], d2[:m]
+        spread_m = spread[:m].copy()
         if fitted_velocities:
             velocity, acceleration = velocity.copy(), acceleration.copy()
             velocity[by_velocity], acceleration[by_velocity] = fitted[m:], d1[m:]
-        return fitted[:m], velocity, acceleration
+            spread_m[by_velocity] = spread[m:]
+        return fitted[:m], velocity, acceleration, spread_m
+
+    # -- consistency --------------------------------------------------------------------------
+
+    def _watch_windows(self, group: JointHistory, smallest: np.ndarray) -> None:
+        """polyfit: the share of recent estimates (about the last 50) that took the smallest window
+        the samples allow; most of them means the motion changes as fast as the samples can show,
+        and the estimate may be off by more than its stated uncertainty. Said per joint, throttled."""
+        joints = np.asarray(group.joints)
+        self._strain[joints] = (1.0 - STRAIN_MEMORY) * self._strain[joints] + STRAIN_MEMORY * smallest
+        self._watched[joints] += 1
+        for j in joints[(self._strain[joints] > STRAIN_LIMIT) & (self._watched[joints] > 2 / STRAIN_MEMORY)]:
+            interval = float(np.median(np.diff(group.stamps[-9:]))) / NS if len(group) > 8 else float("nan")
+            self._log.every(
+                ("estimate-fit", int(j)),
+                logging.WARNING,
+                f"joint {self.joint_names[j]!r}: {self._strain[j]:.0%} of its recent estimates needed the smallest "
+                f"window its samples allow (a sample every {interval * 1e3:.3g} ms): its motion changes about as fast "
+                "as the joint states can show it, and its acceleration may be off by more than its stated "
+                "uncertainty; raise the joint-state rate (or, for less delay, estimator.method kalman)",
+            )
+
+    def _watch_innovations(self, group: JointHistory) -> None:
+        """kalman: each joint's normalised innovations (about the last 50 samples), 1 on average
+        when the model fits the motion and the noise. Far above, the model lags the motion (its
+        length scale too long, the noise set too low); far below, it smooths less than it could.
+        Said per joint, throttled, with the parameter that would fit."""
+        track = group.track
+        if track is None or len(track.nis) != len(group.joints):
+            return
+        read = (track.read_noise.get("positions"), track.read_noise.get("velocities"))
+        weights = np.log(np.maximum(track.weights(), 1e-12)) if track.scores is not None else None
+        for k, j in enumerate(group.joints):
+            self._noise_memory[j] = read
+            if weights is not None:
+                self._score_memory[j] = weights[:, k]
+        joints = np.asarray(group.joints)
+        self._innovations[joints] = (1.0 - STRAIN_MEMORY) * self._innovations[joints] + STRAIN_MEMORY * track.nis
+        self._watched[joints] += 1
+        settings = self.settings.kalman
+        for j in joints[self._watched[joints] > 2 / STRAIN_MEMORY]:
+            ratio = float(self._innovations[j])
+            if ratio > INNOVATION_LIMIT:
+                scale = settings.length_scale or min(LENGTH_SCALES)
+                fix = (
+                    f"set estimator.kalman.length_scale below its {scale:g} s (about 0.65 / the motion's highest "
+                    "frequency, Hz), or estimator.kalman.noise to the encoder's noise"
+                    if settings.length_scale or settings.noise
+                    else f"even its fastest model ({scale:g} s) lags this motion: use estimator.method polyfit"
+                )
+                what = f"{ratio:.3g} times their expected size: the model lags the motion"
+            elif ratio < 1.0 / INNOVATION_LIMIT and settings.noise:
+                fix = f"set estimator.kalman.noise below its {settings.noise:g} (or 0: read from the samples)"
+                what = f"{ratio:.3g} times their expected size: the noise is set higher than it is"
+            else:
+                continue
+            self._log.every(
+                ("estimate-fit", int(j)),
+                logging.WARNING,
+                f"joint {self.joint_names[j]!r}: the kalman estimator's innovations are {what}; {fix}",
+            )
 
     def _say_why(self, group: JointHistory, reason: str) -> None:
         """Log once per warm-up (throttled) why a group's joints have no estimate; warn once per group

@@ -234,6 +234,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
             method=merged["estimator.method"],
             window=merged["estimator.window"],
             order=merged["estimator.order"],
+            adaptive=merged["estimator.adaptive"],
             mode=merged["estimator.mode"],
             lag=None if lag < 0 else lag,
             max_gap=merged["max_gap"],

@@ -93,6 +93,13 @@ PARAMETERS: tuple[Parameter, ...] = (
     ),
     Parameter("estimator.order", "int", DEFAULT_ORDER, "Degree of the local polynomial (polyfit)."),
     Parameter(
+        "estimator.adaptive",
+        "bool",
+        True,
+        "polyfit: choose each joint's window per estimate, up to estimator.window, by the intersection of "
+        "confidence intervals with the noise read from its samples; false: always estimator.window.",
+    ),
+    Parameter(
         "estimator.lag",
         "double",
         -1.0,
@@ -102,19 +109,21 @@ PARAMETERS: tuple[Parameter, ...] = (
         "estimator.kalman.noise",
         "double",
         _KALMAN.noise,
-        "kalman: standard deviation of the positions' noise, rad (m); quantisation step / sqrt(12) for an encoder.",
+        "kalman: standard deviation of the positions' noise, rad (m); quantisation step / sqrt(12) for an encoder. "
+        "0: read from the samples.",
     ),
     Parameter(
         "estimator.kalman.velocity_noise",
         "double",
         _KALMAN.velocity_noise,
-        "kalman: standard deviation of the noise of velocities the messages carry, rad/s (m/s).",
+        "kalman: standard deviation of the noise of velocities the messages carry, rad/s (m/s). 0: read from them.",
     ),
     Parameter(
         "estimator.kalman.length_scale",
         "double",
         _KALMAN.length_scale,
-        "kalman: s; about 0.65 / (the highest frequency of the joints' motion, Hz).",
+        "kalman: s; about 0.65 / (the highest frequency of the joints' motion, Hz). 0: a bank of models, mixed per "
+        "joint by how well each predicts it.",
     ),
     Parameter(
         "estimator.kalman.magnitude",

@@ -1,0 +1,208 @@
+"""Local polynomial fits whose window each joint's data choose: the intersection of confidence
+intervals (ICI) rule, with the noise read from the samples themselves.
+
+A local polynomial fit of half-width h estimates q'' with a bias that grows with h (the motion's
+higher derivatives) and a variance that shrinks with it (more samples, longer lever arm). No window
+suits every motion: 0.2 s fits slow sweeps to 0.1 % and 5 Hz sines or the corners of a trapezoidal
+move to tens of percent. For each estimate, fits are made on a geometric ladder of half-widths,
+from the largest (``window / 2``) down by factors of sqrt(2) while a window still holds
+``order + 3`` samples; each gives q'' and its standard deviation s_h from the fit's own normal
+equations and the noise. Going from the smallest window up, the intervals [q''_h - G s_h,
+q''_h + G s_h] are intersected; the largest window whose interval still meets all the smaller ones'
+is taken (Goldenshluger and Nemirovski 1997; Katkovnik 1999, the ICI rule for adaptive-window
+derivative estimation). Where the motion is smooth every window agrees and the largest (the least
+noisy) wins; where it is not (a fast sine, a move's start), the larger windows' bias breaks the
+intersection and a smaller one is kept.
+
+The noise is read from each joint's own samples in the largest window: white noise from the mean
+absolute sixth difference (the motion's contribution to a sixth difference is small at the rates
+joints are sampled, and where it is not it makes the estimate cautious, not wrong), and an
+encoder's step from the smallest non-zero difference between consecutive samples (sigma = step /
+sqrt(12)); the larger of the two is taken. A quantisation error is not white: it changes only when
+the joint crosses a step, so a window of N samples holds only about (distance travelled / step)
+independent errors, and its variance is scaled up by N over that number.
+
+G, :data:`GAMMA`, is 4: the intervals must not break on noise alone over the thousands of estimates
+a second of a robot's joints gives, and quantisation makes the noise heavier-tailed than a Gaussian.
+
+The node (one target at a time, :func:`adaptive_fit`) and the bag tool (every target at once,
+:func:`adaptive_fits`) take the same windows, noise and rule: the same estimates.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+GAMMA = 4.0
+"""Half-width of each confidence interval, in standard deviations."""
+RATIO = math.sqrt(2.0)
+"""Between consecutive half-widths of the ladder."""
+LEVELS = 10
+"""Half-widths tried at most."""
+_SIXTH = math.sqrt(2.0 / math.pi) * math.sqrt(924.0)  # mean |N(0, 1)| times the sixth difference's gain
+
+
+def ladder(h_max: float) -> np.ndarray:
+    """The half-widths tried, largest first."""
+    return h_max / RATIO ** np.arange(LEVELS)
+
+
+def noise_of(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(white-noise sigma, quantisation step) per column of consecutive samples (k, n); zeros when
+    there are too few samples to tell."""
+    n = values.shape[1]
+    if len(values) < 8:
+        return np.zeros(n), np.zeros(n)
+    sixth = np.diff(values, 6, axis=0)
+    white = np.mean(np.abs(sixth), axis=0) / _SIXTH
+    steps = np.abs(np.diff(values, axis=0))
+    moving = np.where(steps > 0.0, steps, np.inf)
+    step = np.min(moving, axis=0)
+    return white, np.where(np.isfinite(step), step, 0.0)
+
+
+def select(
+    estimates: np.ndarray, stds: np.ndarray, valid: np.ndarray, gamma: float = GAMMA
+) -> tuple[np.ndarray, np.ndarray]:
+    """The ICI choice among (L, ...) estimates, largest window first: (index of the chosen level (...),
+    whether any level was valid). ``valid`` (L, ...): windows with enough samples (the others are
+    skipped). Going from the smallest window up, the intervals' intersection only shrinks, so the
+    choice is the largest window at which the running intersection is still non-empty: running
+    maxima of the lower ends and minima of the upper ends, from the smallest window."""
+    low = np.where(valid, estimates - gamma * stds, -np.inf)
+    high = np.where(valid, estimates + gamma * stds, np.inf)
+    low = np.maximum.accumulate(low[::-1], axis=0)[::-1]
+    high = np.minimum.accumulate(high[::-1], axis=0)[::-1]
+    meets = valid & (low <= high)
+    return np.argmax(meets, axis=0), meets.any(axis=0)
+
+
+def accel_std(
+    variance: np.ndarray, white: np.ndarray, step: np.ndarray, count: np.ndarray, travel: np.ndarray
+) -> np.ndarray:
+    """The standard deviation of q'' from a fit: ``variance`` its factor for unit white noise,
+    ``count`` samples in the window, ``travel`` the distance the joint moved across it."""
+    quantisation = step**2 / 12.0
+    crossings = np.where(step > 0.0, travel / np.where(step > 0.0, step, 1.0), count)
+    independent = np.clip(crossings, 1.0, np.maximum(count, 1.0))
+    effective = np.maximum(white**2, quantisation * count / independent)
+    return np.sqrt(np.maximum(variance, 0.0) * effective)
+
+
+def _window_noise(y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`noise_of` of the samples [lo, hi) of y (T, n), for many windows at once: two (M, n)."""
+    count = len(y)
+    sixth = np.abs(np.diff(y, 6, axis=0)) if count > 6 else np.zeros((0, y.shape[1]))
+    total = np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(sixth, axis=0)])
+    last = np.clip(hi - 6, 0, len(sixth))  # sixth differences wholly inside: [lo, hi - 6)
+    number = np.maximum(last - lo, 0)
+    white = np.where(number[:, None] > 0, (total[last] - total[np.minimum(lo, last)]) / np.maximum(number, 1)[:, None],
+                     0.0) / _SIXTH  # fmt: skip
+    white[hi - lo < 8] = 0.0
+    steps = np.abs(np.diff(y, axis=0))
+    steps = np.where(steps > 0.0, steps, np.inf)
+    pairs = np.stack([lo, np.maximum(hi - 1, lo + 1)], axis=1).reshape(-1)
+    padded = np.concatenate([steps, np.full((1, y.shape[1]), np.inf)])
+    step = np.minimum.reduceat(padded, np.minimum(pairs, len(steps)), axis=0)[::2]
+    step = np.where(np.isfinite(step) & (hi - lo >= 8)[:, None], step, 0.0)
+    return white, step
+
+
+def _lead(level_half_width: float, lead: float) -> float:
+    """How far a level's window reaches past the target: centred while the lag allows it."""
+    return min(lead, level_half_width)
+
+
+def adaptive_fits(
+    t: np.ndarray, y: np.ndarray, targets: np.ndarray, h_max: float, order: int, lead: float, derivative: int = 2
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Value, first and second derivative at each target (M, n), each column's window chosen by the
+    ICI rule on its ``derivative``-th derivative (2 for positions; 1 for measured velocities, whose
+    derivative is the acceleration); and that derivative's standard deviation (M, n).
+
+    Args:
+        t, y: samples (T,), (T, n), t strictly increasing, s.
+        targets: (M,), s.
+        h_max: the largest half-width, s.
+        order: polynomial degree.
+        lead: the largest reach past the target, s (h_max for a centred fit, 0 for a causal one).
+    """
+    from neforward_ros.estimation.fit import polynomial_fits
+
+    levels = ladder(h_max)
+    fits = [polynomial_fits(t, y, targets, h, order, _lead(h, lead), variance=True) for h in levels]
+    needed = order + 3
+    valid = np.stack([f[5] >= needed for f in fits])[:, :, None]
+    first_lead = _lead(levels[0], lead)
+    lo = np.searchsorted(t, targets + first_lead - 2.0 * levels[0], side="left")
+    hi = np.searchsorted(t, targets + first_lead, side="right")
+    white, step = _window_noise(y, lo, hi)
+    speed = np.abs(fits[0][1])
+    estimates = np.stack([f[derivative] for f in fits])
+    stds = np.stack([
+        accel_std(f[2 + derivative][:, None], white, step, f[5][:, None], speed * 2.0 * h)
+        for f, h in zip(fits, levels, strict=True)
+    ])  # fmt: skip
+    chosen, _ = select(estimates, stds, np.broadcast_to(valid, estimates.shape))
+    pick = chosen[None]
+    out = [np.take_along_axis(np.stack([f[i] for f in fits]), pick, 0)[0] for i in range(3)]
+    return out[0], out[1], out[2], np.take_along_axis(stds, pick, 0)[0]
+
+
+def adaptive_fit(
+    times: np.ndarray,
+    values: np.ndarray,
+    target: float,
+    h_max: float,
+    order: int,
+    lead: float,
+    derivative: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`adaptive_fits` at one target (the stream's): ``times, values`` the samples of the
+    largest window ([target + lead - 2 h_max, target + lead]), which the noise is read from too;
+    ``derivative`` (n,) 2 or 1 per column. Returns value, first and second derivative (n,), the
+    chosen derivative's standard deviation (n,), and whether the smallest usable window was chosen
+    (n,): the motion changing as fast as the samples can show. Every level's fit in one vectorised
+    pass, with the arithmetic of :func:`neforward_ros.estimation.fit.polynomial_fits`."""
+    levels = ladder(h_max)
+    leads = np.minimum(lead, levels)
+    lo = times.searchsorted(target + leads - 2.0 * levels, side="left")
+    hi = times.searchsorted(target + leads, side="right")
+    white, step = noise_of(values[lo[0] : hi[0]])
+    counts = (hi - lo).astype(float)
+    valid = counts >= order + 3
+    width = int(np.max(hi - lo))
+    index = lo[:, None] + np.arange(width)
+    inside = index < hi[:, None]
+    index = np.minimum(index, len(times) - 1)
+    tau = (times[index] - target) / levels[:, None]
+    powers = np.empty((len(levels), order + 1, width))
+    powers[:, 0, :] = inside
+    for power in range(1, order + 1):
+        np.multiply(powers[:, power - 1, :], tau, out=powers[:, power, :])
+    gram = powers @ powers.transpose(0, 2, 1)
+    gram[~valid] = np.eye(order + 1)  # a window too small to use: anything solvable
+    coefficients = np.linalg.solve(gram, powers @ values[index])  # (L, order + 1, n)
+    inverse = np.linalg.inv(gram)
+    value = coefficients[:, 0]
+    d1 = coefficients[:, 1] / levels[:, None]
+    d2 = 2.0 * coefficients[:, 2] / levels[:, None] ** 2
+    var1 = inverse[:, 1, 1] / levels**2
+    var2 = 4.0 * inverse[:, 2, 2] / levels**4
+    second = derivative == 2
+    estimates = np.where(second, d2, d1)
+    variance = np.where(second, var2[:, None], var1[:, None])
+    speed = np.abs(d1[0])
+    stds = accel_std(variance, white, step, counts[:, None], speed * 2.0 * levels[:, None])
+    chosen, _ = select(estimates, stds, np.broadcast_to(valid[:, None], estimates.shape))
+    pick = chosen[None]
+    smallest = np.max(np.flatnonzero(valid)) if valid.any() else 0
+    return (
+        np.take_along_axis(value, pick, 0)[0],
+        np.take_along_axis(d1, pick, 0)[0],
+        np.take_along_axis(d2, pick, 0)[0],
+        np.take_along_axis(stds, pick, 0)[0],
+        (chosen == smallest) & (smallest > 0),
+    )

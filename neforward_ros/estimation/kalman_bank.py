@@ -1,0 +1,204 @@
+"""A Kalman estimator that tunes itself: a bank of motion models mixed by how well each predicts
+the joint's samples, with the measurement noise read from the samples.
+
+One Gaussian-process motion model fits one kind of motion: its length scale says how fast the
+motion may change (:mod:`.motion`). A model too slow for a 5 Hz motion lags it by tens of percent;
+one too fast for a slow sweep lets the noise through. The bank runs a filter per length scale of
+:data:`LENGTH_SCALES` side by side (the multiple-model approach of Magill 1965 and Bar-Shalom,
+Li and Kirubarajan, *Estimation with Applications to Tracking and Navigation*, 2001, ch. 11, without
+interaction between the models), and scores each, per joint, by the log-likelihood of the samples
+under its predictions, forgotten with a time constant of :data:`MEMORY`. Each joint's estimate is
+the models' estimates weighted by exp(score), normalised: as the motion changes (a dwell, a fast
+move), the weights follow within a fraction of a second. An explicit ``length_scale`` runs that
+model alone.
+
+The position noise, unless given, is read from the samples as the polynomial fits read it
+(:func:`neforward_ros.estimation.adaptive.noise_of`): white noise from the sixth differences, an
+encoder's step from the smallest non-zero change since the start (through dwells, where no sample
+changes), white noise over the last :data:`NOISE_WINDOW` samples; the velocity noise likewise from
+the velocities the messages carry.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import numpy as np
+
+from neforward_ros.estimation.adaptive import noise_of
+from neforward_ros.estimation.kalman import KalmanTrack
+from neforward_ros.estimation.motion import KalmanSettings, MotionModel
+from neforward_ros.stamps import NS
+
+LENGTH_SCALES = (0.04, 0.1, 0.25, 0.6)
+"""s: the bank's models (each fits motion up to about 0.65 / length_scale Hz)."""
+MEMORY = 0.2
+"""s: the time constant with which the models' scores forget."""
+NOISE_WINDOW = 64
+"""Samples the white noise is read from (the newest)."""
+FALLBACK_NOISE = 1e-4
+"""rad (m): the position noise before enough samples tell it (and its floor: 1e-4 of it)."""
+FALLBACK_VELOCITY_NOISE = 1e-3
+"""rad/s (m/s): likewise for the velocities."""
+
+
+class KalmanBank:
+    """The filters of one group of joints (see the module docstring); the interface of
+    :class:`~neforward_ros.estimation.kalman.KalmanTrack`.
+
+    Args:
+        settings: the Kalman settings; a zero noise, velocity noise or length scale means "from the
+            data" (the bank's length scales for the latter).
+        smooth: whether fixed-lag estimates are asked for.
+    """
+
+    def __init__(
+        self,
+        settings: KalmanSettings,
+        smooth: bool,
+        models: list[MotionModel] | None = None,
+        known_noise: tuple[float | None, float | None] = (None, None),
+        known_scores: np.ndarray | None = None,
+    ) -> None:
+        self.settings = settings
+        self.smooth = smooth
+        self.known_noise = dict(zip(("positions", "velocities"), known_noise, strict=True))
+        """The variances read before a restart (the sensors are the same), used until the samples
+        since tell them again."""
+        if models is None:
+            scales = LENGTH_SCALES if settings.length_scale == 0 else (settings.length_scale,)
+            models = [MotionModel(_concrete(settings, scale)) for scale in scales]
+        self.models = models
+        self.tracks = [KalmanTrack(model, smooth) for model in models]
+        self.scores: np.ndarray | None = None
+        self.known_scores = known_scores  # (models, joints): the weights before a restart, as log-weights
+        self._last: int | None = None
+        self._interval: float | None = None  # s: the usual interval between samples
+        self._positions: deque[np.ndarray] = deque(maxlen=NOISE_WINDOW)
+        self._velocities: deque[np.ndarray] = deque(maxlen=NOISE_WINDOW)
+        self._steps: dict[str, np.ndarray] = {}  # the smallest change seen so far, per joint: an encoder's step
+        self.read_noise: dict[str, float] = {}  # the variances read from the samples so far
+
+    @property
+    def steps(self):  # the steps of the first track (the stamps all tracks share)
+        return self.tracks[0].steps
+
+    def add(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> None:
+        """One sample of every joint (see :meth:`KalmanTrack.add`)."""
+        if self._last is not None and self._interval is not None and (stamp - self._last) / NS > 3.0 * self._interval:
+            # A silence: differences across it are motion, not noise. Read the noise afresh after it,
+            # with what was read before it meanwhile.
+            self.known_noise = {kind: self.read_noise.get(kind, known) for kind, known in self.known_noise.items()}
+            self._positions.clear()
+            self._velocities.clear()
+        self._tune_noise(positions, velocities)
+        likelihoods = np.stack([track.add(stamp, positions, velocities) for track in self.tracks])
+        if self.scores is None or self._last is None:
+            self.scores = likelihoods if self.known_scores is None else likelihoods + self.known_scores
+        else:
+            step = (stamp - self._last) / NS
+            if self._interval is None or step <= 3.0 * self._interval:
+                decay = math.exp(-step / MEMORY)
+                self.scores = decay * self.scores + likelihoods
+            # else: the first sample after a silence: how far each model drifted over it says little
+            # about how well it follows the motion, and would hand the estimate to the fastest.
+            self._interval = step if self._interval is None else min(step, 0.9 * self._interval + 0.1 * step)
+        self._last = stamp
+
+    def weights(self) -> np.ndarray:
+        """(models, joints): each model's weight per joint."""
+        assert self.scores is not None
+        shifted = self.scores - self.scores.max(axis=0, keepdims=True)
+        weights = np.exp(shifted)
+        return weights / weights.sum(axis=0, keepdims=True)
+
+    def estimate(self, target: int) -> np.ndarray:
+        """(3, m) position, velocity and acceleration at the target: the models' mixture."""
+        if len(self.tracks) == 1:
+            return self.tracks[0].estimate(target)
+        weights = self.weights()
+        return sum(w[None, :] * track.estimate(target) for w, track in zip(weights, self.tracks, strict=True))
+
+    def acceleration_std(self) -> np.ndarray:
+        """Each joint's acceleration standard deviation at the newest sample: the mixture's (each
+        model's variance, and the spread of the models' estimates about the mixture)."""
+        if not self.steps:
+            return np.zeros(0)
+        target = self.steps[-1].stamp
+        estimates = np.stack([track.estimate(target)[2] for track in self.tracks])  # (M, m)
+        variances = np.array([track.acceleration_variance() for track in self.tracks])[:, None]
+        if len(self.tracks) == 1:
+            return np.sqrt(np.broadcast_to(variances[0], estimates.shape[1:]))
+        weights = self.weights()
+        mean = np.sum(weights * estimates, axis=0)
+        return np.sqrt(np.sum(weights * (variances + (estimates - mean) ** 2), axis=0))
+
+    @property
+    def nis(self) -> np.ndarray:
+        """Each joint's normalised innovation squared at the last sample, of its best model."""
+        best = np.argmax(self.scores, axis=0) if self.scores is not None else np.zeros(0, dtype=int)
+        stacked = np.stack([track.nis for track in self.tracks])
+        return np.take_along_axis(stacked, best[None], 0)[0] if len(best) else stacked[0]
+
+    def forget_before(self, stamp: int) -> None:
+        for track in self.tracks:
+            track.forget_before(stamp)
+
+    def select(self, columns: list[int]) -> KalmanBank:
+        bank = KalmanBank(self.settings, self.smooth, self.models)
+        bank.known_noise = dict(self.known_noise)
+        bank.read_noise = dict(self.read_noise)
+        bank.tracks = [track.select(columns) for track in self.tracks]
+        bank.scores = None if self.scores is None else self.scores[:, columns]
+        bank._last = self._last
+        bank._interval = self._interval
+        bank._positions = deque((p[columns] for p in self._positions), maxlen=NOISE_WINDOW)
+        bank._velocities = deque((v[columns] for v in self._velocities), maxlen=NOISE_WINDOW)
+        bank._steps = {k: v[columns] for k, v in self._steps.items()}
+        return bank
+
+    def _noise(self, kind: str, samples: deque[np.ndarray], fallback: float) -> float:
+        """A measurement variance for the whole group: the largest of its joints' (white noise, or an
+        encoder's step / sqrt(12)), from the samples kept; the fallback's until there are 32. The
+        step is the smallest change seen since the start, kept through dwells (where no sample
+        changes and the recent samples alone would say nothing)."""
+        if len(samples) < NOISE_WINDOW:
+            known = self.known_noise.get(kind)
+            if known is not None:
+                return known
+            if len(samples) < 32:
+                return fallback**2
+        white, step = noise_of(np.stack(samples))
+        seen = self._steps.get(kind)
+        step = np.where(step > 0.0, step, np.inf)
+        seen = step if seen is None else np.minimum(seen, step)
+        self._steps[kind] = seen
+        known = np.where(np.isfinite(seen), seen, 0.0)
+        variance = np.maximum(white**2, known**2 / 12.0)
+        found = float(max(np.max(variance), (fallback * 1e-4) ** 2))
+        self.read_noise[kind] = found
+        return found
+
+    def _tune_noise(self, positions: np.ndarray, velocities: np.ndarray) -> None:
+        settings = self.settings
+        if settings.noise == 0:
+            self._positions.append(np.asarray(positions, dtype=float).copy())
+            noise = self._noise("positions", self._positions, FALLBACK_NOISE)
+            for track in self.tracks:
+                track._noise = noise
+        if settings.velocity_noise == 0 and np.isfinite(velocities).all():
+            self._velocities.append(np.asarray(velocities, dtype=float).copy())
+            noise = self._noise("velocities", self._velocities, FALLBACK_VELOCITY_NOISE)
+            for track in self.tracks:
+                track._velocity_noise = noise
+
+
+def _concrete(settings: KalmanSettings, length_scale: float) -> KalmanSettings:
+    """The settings of one model: its length scale, and a placeholder noise where the bank reads it."""
+    return KalmanSettings(
+        noise=settings.noise or FALLBACK_NOISE,
+        velocity_noise=settings.velocity_noise or FALLBACK_VELOCITY_NOISE,
+        length_scale=length_scale,
+        magnitude=settings.magnitude,
+    )
