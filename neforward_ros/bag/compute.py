@@ -201,6 +201,7 @@ def _whole(
     target_s = (targets - origin) / NS
     state = np.full((3, len(targets), n), np.nan)
     efforts = np.full((len(targets), n), np.nan)
+    spread = np.full((len(targets), n), np.nan)
     # As the node, which emits an estimate once a message about `after` later arrives (half an
     # interval early, for jitter) and has none for the last stretch of a stream.
     early = 0.5 * float(np.median(np.diff(target_s))) if len(target_s) > 1 else 0.0
@@ -226,7 +227,7 @@ def _whole(
     for (t_bytes, use_velocity), members in groups.items():
         t = (np.frombuffer(t_bytes, dtype=np.int64) - origin) / NS
         joints = [j for j, _, _ in members]
-        q_at, qd_at, qdd_at = estimate_at(
+        q_at, qd_at, qdd_at, std_at = estimate_at(
             t,
             np.stack([q for _, q, _ in members], axis=1),
             target_s,
@@ -235,6 +236,7 @@ def _whole(
             window=batch.window,
             order=batch.order,
             adaptive=batch.adaptive,
+            spread=True,
         )
         stale = _gap_to_samples(t, target_s) > settings.estimator.max_gap
         silent[:, joints] = stale[:, None]
@@ -242,8 +244,9 @@ def _whole(
         for column, values in enumerate((q_at, qd_at, qdd_at)):
             values[unready] = np.nan
             state[column][:, joints] = values
+        spread[:, joints] = np.where(unready[:, None], np.nan, std_at)
     ready = np.isfinite(state).all(axis=0)
-    states = JointStates(targets, *np.where(ready, state, 0.0), ready, silent, efforts)
+    states = JointStates(targets, *np.where(ready, state, 0.0), ready, silent, efforts, spread)
     return states, recording.log_times[start:stop][first], sorted(set(absent))
 
 

@@ -39,8 +39,9 @@ from neforward_ros.computation.policy import apply_policy, hold_vector
 from neforward_ros.computation.result import Dynamics, Observation, Result, make_result
 from neforward_ros.kinematics.effort_model import EffortModel
 from neforward_ros.kinematics.forward import kinematics_table, root_state
+from neforward_ros.kinematics.forward_kernel import SLICES
 from neforward_ros.kinematics.inverse_dynamics import split_values, wrenches_from_table
-from neforward_ros.kinematics.jacobian import wrench_at_link
+from neforward_ros.kinematics.jacobian import jacobian_from_table, wrench_at_link
 from neforward_ros.logs import LogFunction, ThrottledLog
 from neforward_ros.model import RobotModel
 from neforward_ros.parameters.settings import NodeSettings
@@ -77,9 +78,7 @@ class ComputeState:
         contact = None
         if settings.contact_thresholds:
             thresholds = np.array([settings.contact_thresholds.get(n, np.nan) for n in names])
-            contact = ContactDetector(
-                thresholds, settings.contact_debounce, names, throttled, settings.contact_release
-            )
+            contact = ContactDetector(thresholds, settings.contact_debounce, names, throttled, settings.contact_release)
         friction = settings.friction
         effort = EffortModel.of(
             names,
@@ -185,6 +184,9 @@ def compute(
         root, world = root_and_world(model, q, qd, qdd, base, settings.world_states)
     table = kinematics_table(model, q, qd, qdd, root)
     result = make_result(model, stamps, table, determined)
+    if settings.imu_links and states.acceleration_std is not None:
+        spread = states.acceleration_std if single or rows is None else states.acceleration_std[rows]
+        result = replace(result, imu_covariance=imu_covariances(model, table, spread, settings.imu_links))
     if world is not None and (not single or np.isfinite(world[0]).all()):
         result = replace(result, world=world)
     if settings.dynamics_needed and (not single or determined is None):
@@ -224,3 +226,23 @@ def observe_raw(model: RobotModel, settings: NodeSettings, raw: RawStates, state
     if settings.contact_link and settings.contact_link in model.link_index:
         wrench = wrench_at_link(model, raw.q, external, settings.contact_link)
     return Observation(raw.stamps, model.joint_names, raw.q, raw.qd, external, contact, wrench, settings.contact_link)
+
+
+def imu_covariances(
+    model: RobotModel, table: np.ndarray, acceleration_std: np.ndarray, links: tuple[str, ...]
+) -> dict[str, np.ndarray]:
+    """Each link's linear-acceleration covariance (..., 3, 3), link frame, from the joints'
+    acceleration standard deviations (..., n) through the link's Jacobian: J diag(std^2) J^T (the
+    joint accelerations' errors taken as independent; the velocities' errors left out). NaN where
+    a joint that moves the link has no standard deviation."""
+    out = {}
+    for link in links:
+        index = model.link_index.get(link)
+        if index is None:
+            continue
+        jacobian = jacobian_from_table(model, table, index)[..., 0:3, :]  # root axes
+        rotation = table[..., index, SLICES["rotation"]].reshape(*table.shape[:-2], 3, 3)
+        in_link = np.swapaxes(rotation, -1, -2) @ jacobian
+        weighted = in_link * np.square(acceleration_std)[..., None, :]
+        out[link] = weighted @ np.swapaxes(in_link, -1, -2)
+    return out

@@ -27,6 +27,8 @@ class JointStates:
             ``publish_policy: hold`` holds.
         efforts: the measured efforts at the stamp as the input gave them (before ``effort.*``), NaN
             where there are none.
+        acceleration_std: the estimator's standard deviation of each acceleration, NaN where it gives
+            none (supplied states, a fixed-window estimator).
     """
 
     stamps: Any
@@ -36,6 +38,7 @@ class JointStates:
     ready: np.ndarray
     silent: np.ndarray
     efforts: np.ndarray
+    acceleration_std: np.ndarray | None = None
 
     @property
     def single(self) -> bool:
@@ -51,6 +54,7 @@ class JointStates:
         n = len(estimate.positions)
         efforts = estimate.efforts if estimate.efforts is not None else np.full(n, np.nan)
         silent = ~(estimate.ages <= max_gap)
+        spread = estimate.acceleration_std if estimate.acceleration_std is not None else np.full(n, np.nan)
         return cls(
             estimate.stamp_ns,
             estimate.positions,
@@ -59,6 +63,7 @@ class JointStates:
             estimate.ready,
             silent,
             efforts,
+            spread,
         )
 
     @classmethod
@@ -66,7 +71,7 @@ class JointStates:
         """A batch of no stamps."""
         nothing = np.zeros((0, joints))
         flags = nothing.astype(bool)
-        return cls(np.zeros(0, dtype=np.int64), nothing, nothing, nothing, flags, flags, nothing)
+        return cls(np.zeros(0, dtype=np.int64), nothing, nothing, nothing, flags, flags, nothing, nothing)
 
     @classmethod
     def stack(cls, parts: list[JointStates]) -> JointStates:
@@ -78,12 +83,15 @@ class JointStates:
             values = [getattr(p, name) for p in parts]
             return np.stack(values) if parts[0].single else np.concatenate(values)
 
+        spreads = [p.acceleration_std if p.acceleration_std is not None else np.full(p.q.shape, np.nan) for p in parts]
+        spread = np.stack(spreads) if parts[0].single else np.concatenate(spreads)
         stamps = np.array([p.stamps for p in parts], dtype=np.int64) if parts[0].single else rows("stamps")
-        return cls(stamps, *(rows(name) for name in ("q", "qd", "qdd", "ready", "silent", "efforts")))
+        return cls(stamps, *(rows(name) for name in ("q", "qd", "qdd", "ready", "silent", "efforts")), spread)
 
     def part(self, index: Any) -> JointStates:
         """Rows ``index`` (a slice, mask or index array) of a batch."""
-        return JointStates(*(getattr(self, name)[index] for name in _FIELDS))
+        spread = self.acceleration_std if self.acceleration_std is not None else np.full(self.q.shape, np.nan)
+        return JointStates(*(getattr(self, name)[index] for name in _FIELDS), spread[index])
 
 
 _FIELDS = ("stamps", "q", "qd", "qdd", "ready", "silent", "efforts")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any
@@ -121,6 +122,8 @@ class Result:
             batch's: (T,) floats, 1 or 0, NaN where unknown).
         world: the root's pose in the world, (rotation root -> world (..., 3, 3), position (..., 3)),
             when the base source gives orientation (a zero position when it gives none).
+        imu_covariance: per ``imu_links`` link, the covariance of its linear acceleration (..., 3, 3),
+            link frame, m^2/s^4, from the joints' acceleration uncertainty; NaN where unknown.
     """
 
     stamp_ns: Any
@@ -132,6 +135,7 @@ class Result:
     dynamics: Dynamics | None = None
     contact: Any = None
     world: tuple[np.ndarray, np.ndarray] | None = None
+    imu_covariance: Mapping[str, np.ndarray] | None = None
 
     @property
     def ids(self) -> tuple[int, ...]:
@@ -171,6 +175,9 @@ class Result:
                 dynamics=None if self.dynamics is None else self.dynamics.part(part),
                 contact=None if self.contact is None else self.contact[part],
                 world=None if self.world is None else (self.world[0][part], self.world[1][part]),
+                imu_covariance=None
+                if self.imu_covariance is None
+                else {k: v[part] for k, v in self.imu_covariance.items()},
             )
             out.append((part, run.only(self.determined[start])))
         return out
@@ -210,6 +217,9 @@ class Result:
             dynamics=dynamics,
             contact=contact,
             world=world,
+            imu_covariance=None
+            if self.imu_covariance is None
+            else {k: v[index] for k, v in self.imu_covariance.items()},
         )
         if "blocks" in self.__dict__:
             sample.__dict__["blocks"] = tuple(tuple(b[index] for b in blocks) for blocks in self.blocks)

@@ -25,6 +25,11 @@ independent errors, and its variance is scaled up by N over that number.
 G, :data:`GAMMA`, is 4: the intervals must not break on noise alone over the thousands of estimates
 a second of a robot's joints gives, and quantisation makes the noise heavier-tailed than a Gaussian.
 
+The standard deviation stated with each estimate is the chosen fit's noise part: where the noise
+dominates (slow motion, noisy samples), the error is within it as a Gaussian's is. Where the
+motion's curvature dominates, the window's bias adds to it, which the rule keeps within a few of them
+(a larger bias breaks the intersection): not a bound to rely on there.
+
 The node (one target at a time, :func:`adaptive_fit`) and the bag tool (every target at once,
 :func:`adaptive_fits`) take the same windows, noise and rule: the same estimates.
 """
@@ -41,6 +46,8 @@ RATIO = math.sqrt(2.0)
 """Between consecutive half-widths of the ladder."""
 LEVELS = 10
 """Half-widths tried at most."""
+ROUGHNESS = 0.01
+"""The noise, relative to the samples' spread in the largest window, above which an estimate strains."""
 _SIXTH = math.sqrt(2.0 / math.pi) * math.sqrt(924.0)  # mean |N(0, 1)| times the sixth difference's gain
 
 
@@ -145,7 +152,8 @@ def adaptive_fits(
         accel_std(f[2 + derivative][:, None], white, step, f[5][:, None], speed * 2.0 * h)
         for f, h in zip(fits, levels, strict=True)
     ])  # fmt: skip
-    chosen, _ = select(estimates, stds, np.broadcast_to(valid, estimates.shape))
+    valid = np.broadcast_to(valid, estimates.shape)
+    chosen, _ = select(estimates, stds, valid)
     pick = chosen[None]
     out = [np.take_along_axis(np.stack([f[i] for f in fits]), pick, 0)[0] for i in range(3)]
     return out[0], out[1], out[2], np.take_along_axis(stds, pick, 0)[0]
@@ -163,9 +171,11 @@ def adaptive_fit(
     """:func:`adaptive_fits` at one target (the stream's): ``times, values`` the samples of the
     largest window ([target + lead - 2 h_max, target + lead]), which the noise is read from too;
     ``derivative`` (n,) 2 or 1 per column. Returns value, first and second derivative (n,), the
-    chosen derivative's standard deviation (n,), and whether the smallest usable window was chosen
-    (n,): the motion changing as fast as the samples can show. Every level's fit in one vectorised
-    pass, with the arithmetic of :func:`neforward_ros.estimation.fit.polynomial_fits`."""
+    chosen derivative's standard deviation (n,), and whether the estimate strains (n,): the smallest
+    usable window was chosen (the motion changes as fast as the samples can show), or the samples
+    vary beyond a smooth motion by more than :data:`ROUGHNESS` of their spread in the window (noise,
+    or a motion too fast for the rate: the two look alike to differences). Every level's fit in one
+    vectorised pass, with the arithmetic of :func:`neforward_ros.estimation.fit.polynomial_fits`."""
     levels = ladder(h_max)
     leads = np.minimum(lead, levels)
     lo = times.searchsorted(target + leads - 2.0 * levels, side="left")
@@ -199,10 +209,12 @@ def adaptive_fit(
     chosen, _ = select(estimates, stds, np.broadcast_to(valid[:, None], estimates.shape))
     pick = chosen[None]
     smallest = np.max(np.flatnonzero(valid)) if valid.any() else 0
+    window = values[lo[0] : hi[0]]
+    rough = white > ROUGHNESS * np.std(window, axis=0) if len(window) > 1 else np.zeros(values.shape[1], bool)
     return (
         np.take_along_axis(value, pick, 0)[0],
         np.take_along_axis(d1, pick, 0)[0],
         np.take_along_axis(d2, pick, 0)[0],
         np.take_along_axis(stds, pick, 0)[0],
-        (chosen == smallest) & (smallest > 0),
+        ((chosen == smallest) & (smallest > 0)) | rough,
     )

@@ -99,7 +99,8 @@ def estimate_at(
     window: float = DEFAULT_WINDOW,
     order: int = DEFAULT_ORDER,
     adaptive: bool = True,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    spread: bool = False,
+) -> tuple[np.ndarray, ...]:
     """Positions, velocities and accelerations at arbitrary target times, non-causal.
 
     The whole-recording estimate for joints sampled at their own times (partial messages from
@@ -115,13 +116,15 @@ def estimate_at(
         method, window, order: as for :func:`estimate_derivatives`.
         adaptive: polyfit: each column's window chosen per target, up to ``window``, as the
             streaming estimator's (:mod:`neforward_ros.estimation.adaptive`).
+        spread: also return the accelerations' standard deviations (NaN where the method gives none).
 
     Returns:
-        three (M, m) arrays.
+        three (M, m) arrays (four with ``spread``).
     """
     check_settings(method, window, order)
     index = np.minimum(np.searchsorted(t, targets), len(t) - 1)
     exact = t[index] == targets
+    std = np.full((len(targets), q.shape[1]), np.nan)
     if method == "difference":
         d1 = np.gradient(q, t, axis=0, edge_order=2) if velocity is None else velocity
         d2 = np.gradient(d1, t, axis=0, edge_order=2)
@@ -130,10 +133,10 @@ def estimate_at(
     elif adaptive:
         half_width = window / 2.0
         if velocity is None:
-            q_at, qd_at, qdd_at, _ = adaptive_fits(t, q, targets, half_width, order, half_width)
+            q_at, qd_at, qdd_at, std = adaptive_fits(t, q, targets, half_width, order, half_width)
         else:  # the window chosen on the velocities, whose derivative is the acceleration
             q_at, _, _, _ = adaptive_fits(t, q, targets, half_width, order, half_width)
-            qd_at, qdd_at, _, _ = adaptive_fits(t, velocity, targets, half_width, order, half_width, derivative=1)
+            qd_at, qdd_at, _, std = adaptive_fits(t, velocity, targets, half_width, order, half_width, derivative=1)
     else:
         half_width = window / 2.0
         q_at, qd_at, qdd_at = local_polynomial(t, q, targets, half_width, order)
@@ -142,4 +145,4 @@ def estimate_at(
     q_at[exact] = q[index[exact]]
     if velocity is not None:
         qd_at[exact] = velocity[index[exact]]
-    return q_at, qd_at, qdd_at
+    return (q_at, qd_at, qdd_at, std) if spread else (q_at, qd_at, qdd_at)

@@ -429,10 +429,11 @@ class StreamingEstimator:
             self._log.every(
                 ("estimate-fit", int(j)),
                 logging.WARNING,
-                f"joint {self.joint_names[j]!r}: {self._strain[j]:.0%} of its recent estimates needed the smallest "
-                f"window its samples allow (a sample every {interval * 1e3:.3g} ms): its motion changes about as fast "
-                "as the joint states can show it, and its acceleration may be off by more than its stated "
-                "uncertainty; raise the joint-state rate (or, for less delay, estimator.method kalman)",
+                f"joint {self.joint_names[j]!r}: {self._strain[j]:.0%} of its recent estimates strained (the smallest "
+                f"window its samples allow, or samples that vary beyond a smooth motion; a sample every "
+                f"{interval * 1e3:.3g} ms): its motion changes about as fast as the joint states can show it, or their "
+                "noise is large, and its acceleration may be off by more than its stated uncertainty; raise the "
+                "joint-state rate (or, for less delay, estimator.method kalman)",
             )
 
     def _watch_innovations(self, group: JointHistory) -> None:

@@ -146,11 +146,18 @@ def imu(result: Result, link: int, frame_prefix: str = "") -> Message:
 
     orientation: the link frame's orientation in the root frame. angular_velocity: omega in the link
     frame. linear_acceleration: the specific force in the link frame (+9.81 m/s^2 upward at rest, as
-    a real accelerometer reads). Covariances are all zero, which sensor_msgs/Imu defines as
-    "covariance unknown": the values are exact for the model, with no sensor noise model.
+    a real accelerometer reads). linear_acceleration_covariance: what the joint accelerations'
+    estimated uncertainty gives through the link's Jacobian (the estimator's, see
+    :attr:`Result.imu_covariance`); all zero, which sensor_msgs/Imu defines as "covariance unknown",
+    where the estimator gives none. The other covariances are zero: unknown.
     """
     kin = result.in_link
     zeros = [0.0] * 9
+    name = result.link_names[link]
+    covariance = list(zeros)
+    known = result.imu_covariance.get(name) if result.imu_covariance is not None else None
+    if known is not None and known.shape == (3, 3) and np.isfinite(known).all():
+        covariance = known.reshape(9).tolist()
     return {
         "header": header(result.stamp_ns, frame_prefix + result.link_names[link]),
         "orientation": _quaternion(kin.orientation[link]),
@@ -158,7 +165,7 @@ def imu(result: Result, link: int, frame_prefix: str = "") -> Message:
         "angular_velocity": vector3(kin.omega[link]),
         "angular_velocity_covariance": list(zeros),
         "linear_acceleration": vector3(kin.accel[link]),
-        "linear_acceleration_covariance": list(zeros),
+        "linear_acceleration_covariance": covariance,
     }
 
 
