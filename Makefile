@@ -42,6 +42,7 @@ bench: $(VENV)/.installed-test $(if $(HAVE_ROS),$(ROS_VENV)/.installed)
 	$(BIN)/python bench/bench_fleet.py
 	$(BIN)/python bench/bench_dds.py
 	$(BIN)/python bench/bench_contact.py --live
+	$(BIN)/python bench/bench_interrupts.py
 	$(if $(HAVE_ROS),$(BIN)/python bench/bench_ros.py,@echo "make bench: no ROS 2 Jazzy, so bench/bench_ros.py is not run")
 
 $(BIN)/python:

@@ -55,23 +55,6 @@ def robots() -> list[tuple[str, Path, str]]:
     return found
 
 
-def events(output: Path) -> tuple[dict[int, np.ndarray], list[tuple[int, bool]]]:
-    from rosbags.rosbag2 import Reader
-
-    from neforward_ros.stamps import stamp_ns
-    from neforward_ros.wire.rostypes import deserialize
-
-    external, contact = {}, []
-    with Reader(output) as reader:
-        for connection, log_time, raw in reader.messages():
-            if connection.topic == "/neforward/external_torques":
-                message = deserialize(connection.msgtype, raw)
-                external[stamp_ns(message["header"]["stamp"])] = np.array(message["effort"])
-            elif connection.topic == "/neforward/contact":
-                contact.append((log_time, bool(deserialize(connection.msgtype, raw)["data"])))
-    return external, contact
-
-
 def score(pushed: sim.Simulated, external: dict, contact: list[tuple[int, bool]]) -> dict:
     times = np.array([t for t, _ in contact])
     states = np.array([s for _, s in contact], dtype=int)
@@ -122,7 +105,7 @@ def case(name: str, urdf: Path, tool: str, noise: float, seed: int, folder: Path
     (folder / "params.yaml").write_text("")
     options = BagOptions.from_parameters(found.parameters)
     process_bag(folder / "pushed", folder / "out", options)
-    external, contact = events(folder / "out")
+    external, contact = sim.read_outputs(folder / "out")
     result = score(pushed, external, contact)
     result.update(friction=friction_error, cutoff=found.parameters.get("external_torques.velocity_cutoff"),
                   seconds=calibrate_seconds, noted=sum(names[j] in noted for j in moving))  # fmt: skip
@@ -138,10 +121,8 @@ def live(seconds: float = 14.0) -> None:
     sys.path.insert(0, str(ROOT / "test"))
     from neforward_ros.dds.loopback import write_config
     from neforward_ros.interface import topics
-    from neforward_ros.stamps import time_message
-    from neforward_ros.wire import rostypes
 
-    from dds_peer import NodeProcess, Peer, loopback_env
+    from dds_peer import NodeProcess, Peer, loopback_env, stream_arm
 
     name, urdf, tool = robots()[0]
     n = 8
@@ -167,24 +148,7 @@ def live(seconds: float = 14.0) -> None:
             peer.reader("/neforward/contact", topics.BOOL_TYPE)
             peer.wait_connected(node)
             time.sleep(1.0)
-            contact: list[tuple[float, bool]] = []
-            sent = np.zeros(len(pushed.stamps))
-            start = time.monotonic()
-            for k, stamp in enumerate(pushed.stamps.tolist()):
-                delay = start + k / 500.0 - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-                peer.write("/joint_states", {
-                    "header": {"stamp": time_message(stamp)}, "name": pushed.names, "position": pushed.q[k].tolist(),
-                    "velocity": pushed.qd[k].tolist(), "effort": pushed.effort[k].tolist(),
-                })  # fmt: skip
-                sent[k] = time.monotonic()
-                arrived = peer.take("/neforward/contact")
-                now = time.monotonic()
-                contact += [(now, rostypes.deserialize(topics.BOOL_TYPE, b)["data"]) for b in arrived]
-            peer.wait(0.5)
-            contact += [(time.monotonic(), rostypes.deserialize(topics.BOOL_TYPE, b)["data"])
-                        for b in peer.take("/neforward/contact")]  # fmt: skip
+            sent, contact, _ = stream_arm(peer, pushed, 500.0)
         finally:
             node.stop()
     changes = [(t, s) for (t, s), (_, before) in zip(contact[1:], contact[:-1], strict=True) if s != before]

@@ -15,7 +15,7 @@ and each method/setting, it prints:
 - outputs: how many inputs got an estimate; us/msg: the estimator's time per message.
 
 With --plot PATH, writes the trade-off (delay against q-ddot error, one point per setting) for the
-noisy 500 Hz variant as a PNG: the README's figure is docs/estimators.png.
+noisy 500 Hz variant as a PNG (the README's figure comes from bench_estimator_family.py).
 
 Usage: python bench/bench_estimators.py [--seconds 8] [--plot docs/estimators.png] [--variants ...]
 """

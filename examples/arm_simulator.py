@@ -266,6 +266,25 @@ def write(simulated: Simulated, urdf: str, output: Path) -> None:
             writer.write(joint_states, stamp, cdr.encode(topics.JOINT_STATE_TYPE, contents))
 
 
+def read_outputs(output: Path) -> tuple[dict[int, np.ndarray], list[tuple[int, bool]]]:
+    """What ``neforward bag`` wrote: the external torques by stamp, and ~/contact's states with their
+    recording times, in order."""
+    from rosbags.rosbag2 import Reader
+
+    from neforward_ros.stamps import stamp_ns
+    from neforward_ros.wire.rostypes import deserialize
+
+    external, contact = {}, []
+    with Reader(output) as reader:
+        for connection, log_time, raw in reader.messages():
+            if connection.topic == "/neforward/external_torques":
+                message = deserialize(connection.msgtype, raw)
+                external[stamp_ns(message["header"]["stamp"])] = np.array(message["effort"])
+            elif connection.topic == "/neforward/contact":
+                contact.append((log_time, bool(deserialize(connection.msgtype, raw)["data"])))
+    return external, contact
+
+
 def standard_pushes(start: float, spacing: float = 4.0, magnitude: float = 15.0) -> tuple[Push, ...]:
     """Three pushes: downwards for 2 s, sideways for 1 s, forwards for 1.5 s."""
     return (

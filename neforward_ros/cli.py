@@ -125,7 +125,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """The command; returns its exit status (130 after Ctrl-C, as shells count it)."""
-    _ctrl_c_raises()
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
         ros_args: list[str] = []
@@ -133,6 +132,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             split = argv.index("--ros-args")
             argv, ros_args = argv[: split + 1], argv[split + 1 :]
         args = build_parser().parse_args(argv)
+        # The command's modules (and the C extensions they load) are imported while a Ctrl-C still ends
+        # the process at once: one that lands inside a C extension's import can come out as an
+        # ImportError that no longer says it was an interrupt.
+        _preload(args.command)
+        _ctrl_c_raises()
         if args.command == "table":
             if args.samples < 1 or not (math.isfinite(args.seconds) and args.seconds >= 0):
                 raise NeforwardError("--samples must be at least 1 and --seconds a non-negative number")
@@ -179,6 +183,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         terminal.say("neforward: interrupted")
         return 130
     return 0
+
+
+_COMMAND_MODULES = {
+    "bag": ("neforward_ros.bag.commands", "neforward_ros.bag.process"),
+    "calibrate": ("neforward_ros.calibration.commands", "neforward_ros.calibration.calibrate"),
+    "run": ("neforward_ros.dds.commands", "cyclonedds.domain"),
+    "echo": ("neforward_ros.dds.commands", "cyclonedds.domain"),
+    "play": ("neforward_ros.dds.play", "cyclonedds.domain"),
+    "demo": ("neforward_ros.demo.live", "cyclonedds.domain"),
+    "table": ("neforward_ros.demo.table",),
+}
+
+
+def _preload(command: str) -> None:
+    """Import what the command runs on; a module that cannot be imported is left for the command to
+    report."""
+    import importlib
+
+    for name in ("numpy", *_COMMAND_MODULES.get(command, ())):
+        try:
+            importlib.import_module(name)
+        except ImportError:
+            pass
 
 
 def _ctrl_c_raises() -> None:

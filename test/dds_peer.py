@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.pub import DataWriter
@@ -136,3 +137,43 @@ def loopback_env(domain_id: int, config_uri: str) -> dict[str, str]:
     environment = dict(os.environ)
     environment.update({"CYCLONEDDS_URI": config_uri, "ROS_DOMAIN_ID": str(domain_id)})
     return environment
+
+
+def stream_arm(peer: Peer, simulated, rate: float, settle: float = 0.5) -> tuple:
+    """Write a simulated arm's joint states (``examples/arm_simulator.py``) on /joint_states at
+    ``rate`` Hz in real time, collecting what arrives on /neforward/contact (with its arrival time)
+    and /neforward/external_torques meanwhile and for ``settle`` s after; (send times (T,),
+    [(arrival, state)], [external torques' bytes])."""
+    contact: list[tuple[float, bool]] = []
+    external: list[bytes] = []
+    watched = "/neforward/external_torques" in peer.readers
+
+    def collect() -> None:
+        now = time.monotonic()
+        nonlocal external
+        contact.extend((now, cdr_bool(b)) for b in peer.take("/neforward/contact"))
+        if watched:
+            external += peer.take("/neforward/external_torques")
+
+    sent = np.zeros(len(simulated.stamps))
+    start = time.monotonic()
+    for k, stamp in enumerate(simulated.stamps.tolist()):
+        delay = start + k / rate - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        peer.write("/joint_states", {
+            "header": {"stamp": time_message(stamp)}, "name": simulated.names, "position": simulated.q[k].tolist(),
+            "velocity": simulated.qd[k].tolist(), "effort": simulated.effort[k].tolist(),
+        })  # fmt: skip
+        sent[k] = time.monotonic()
+        collect()
+    deadline = time.monotonic() + settle
+    while time.monotonic() < deadline:
+        peer.wait(0.05)
+        collect()
+    return sent, contact, external
+
+
+def cdr_bool(data: bytes) -> bool:
+    """A std_msgs/Bool's value."""
+    return bool(data[4])

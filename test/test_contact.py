@@ -205,23 +205,6 @@ def test_planted_bug_friction_sign_flipped_is_caught(recordings, monkeypatch, tm
         check_friction_within(found.parameters, recordings["joints"], 0.05)
 
 
-def contact_events(output: Path) -> tuple[dict[int, np.ndarray], list[tuple[int, bool]]]:
-    from rosbags.rosbag2 import Reader
-
-    from neforward_ros.stamps import stamp_ns
-    from neforward_ros.wire.rostypes import deserialize
-
-    external, contact = {}, []
-    with Reader(output) as reader:
-        for connection, log_time, raw in reader.messages():
-            if connection.topic == "/neforward/external_torques":
-                message = deserialize(connection.msgtype, raw)
-                external[stamp_ns(message["header"]["stamp"])] = np.array(message["effort"])
-            elif connection.topic == "/neforward/contact":
-                contact.append((log_time, deserialize(connection.msgtype, raw)["data"]))
-    return external, contact
-
-
 def transitions(contact: list[tuple[int, bool]]) -> tuple[list[int], list[int]]:
     times = np.array([t for t, _ in contact])
     states = np.array([s for _, s in contact], dtype=int)
@@ -236,7 +219,7 @@ def test_bag_with_the_calibration_detects_pushes_within_30_ms(recordings, calibr
     done = neforward("bag", str(recordings["folder"] / "pushed"), "-o", str(output), "--params",
                      str(calibrated["params"]))  # fmt: skip
     assert done.returncode == 0, done.stderr
-    external, contact = contact_events(output)
+    external, contact = sim.read_outputs(output)
     on, off = transitions(contact)
     pushed = recordings["pushed"]
     assert len(on) == len(pushed.intervals), (on, pushed.intervals)  # no false contact, none missed
@@ -288,7 +271,7 @@ def test_node_gives_the_bag_tools_observer_numbers(recordings, calibrated, tmp_p
         assert (contact is None and not np.isfinite(observed.contact[k])) or contact == bool(observed.contact[k])
         np.testing.assert_allclose(wrench, observed.wrench[k], rtol=0, atol=1e-9, equal_nan=True)
     process_bag(short, tmp_path / "bag_out", options)
-    external, contact = contact_events(tmp_path / "bag_out")
+    external, contact = sim.read_outputs(tmp_path / "bag_out")
     assert len(external) == int(np.isfinite(observed.external).all(axis=1).sum())  # none while warming up
 
 

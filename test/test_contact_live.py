@@ -21,10 +21,8 @@ import numpy as np
 
 from neforward_ros.dds.loopback import write_config
 from neforward_ros.interface import topics
-from neforward_ros.stamps import time_message
-from neforward_ros.wire import rostypes
 
-from dds_peer import NodeProcess, Peer, loopback_env
+from dds_peer import NodeProcess, Peer, loopback_env, stream_arm
 from test_contact import SEED, arm, arm_urdf, neforward
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
@@ -53,29 +51,7 @@ def test_contact_live_over_dds(tmp_path) -> None:
         peer.reader("/neforward/external_torques", topics.JOINT_STATE_TYPE)
         peer.wait_connected(node)
         time.sleep(1.0)  # the node compiles its kernels meanwhile
-        contact: list[tuple[float, bool]] = []
-        external: list[bytes] = []
-        sent = np.zeros(len(pushed.stamps))
-        start = time.monotonic()
-        for k, stamp in enumerate(pushed.stamps.tolist()):
-            delay = start + k / 500.0 - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
-            peer.write("/joint_states", {
-                "header": {"stamp": time_message(stamp)}, "name": pushed.names, "position": pushed.q[k].tolist(),
-                "velocity": pushed.qd[k].tolist(), "effort": pushed.effort[k].tolist(),
-            })  # fmt: skip
-            sent[k] = time.monotonic()
-            now = time.monotonic()
-            arrived = peer.take("/neforward/contact")
-            contact += [(now, rostypes.deserialize(topics.BOOL_TYPE, b)["data"]) for b in arrived]
-            external += peer.take("/neforward/external_torques")
-        deadline = time.monotonic() + 5.0
-        while time.monotonic() < deadline and len(external) < len(pushed.stamps) - 200:
-            peer.wait(0.05)
-            external += peer.take("/neforward/external_torques")
-            contact += [(time.monotonic(), rostypes.deserialize(topics.BOOL_TYPE, b)["data"])
-                        for b in peer.take("/neforward/contact")]  # fmt: skip
+        sent, contact, external = stream_arm(peer, pushed, 500.0, settle=3.0)
     finally:
         node.stop()
     push_start = int(np.searchsorted(pushed.stamps, pushed.intervals[0][0]))

@@ -9,7 +9,6 @@ the kinetic energy 1/2 qd^T M(q) qd, by central differences of Pinocchio's own M
 
 from __future__ import annotations
 
-import importlib.metadata
 from pathlib import Path
 
 import numpy as np
@@ -21,16 +20,9 @@ from neforward_ros.kinematics.joint_space import mass_matrix, momentum_terms
 
 from conftest import TEST_ROBOTS
 from oracle import PinocchioOracle
+from test_corpus import example_robot_data
 
 TOLERANCE = 1e-9
-
-
-def corpus() -> list[Path]:
-    try:
-        files = importlib.metadata.files("example-robot-data") or []
-    except importlib.metadata.PackageNotFoundError:
-        return []
-    return sorted(Path(str(f.locate())) for f in files if str(f).endswith(".urdf"))
 
 
 def pinocchio_terms(oracle: PinocchioOracle, names, q, qd) -> tuple[np.ndarray, ...]:
@@ -82,7 +74,7 @@ def test_joint_space_terms_agree_with_pinocchio(robot: str) -> None:
 
 
 def test_joint_space_terms_agree_with_pinocchio_on_published_robots() -> None:
-    files = [p for p in corpus() if not has_mimic(p)]
+    files = [p for p in example_robot_data() if not has_mimic(p)]
     if not files:
         pytest.skip("pip install example-robot-data (a test extra)")
     checked = 0

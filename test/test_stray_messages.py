@@ -70,7 +70,10 @@ def test_strays_mixed_into_a_good_stream_change_no_good_estimate(settings: Strea
     # the message with non-finite positions: its finite joint b is a good sample (1 ns before the next
     # one), which joint b's fits then hold as well, and its stamp is a new newest one (a fixed-lag
     # estimate may leave with it, before the other joints' next samples): near it, estimates differ a
-    # little (1e-2 of the signal's scale at most), and later by what a Kalman filter remembers of it.
+    # little (1e-2 of the signal's scale at most), and later by what a Kalman filter remembers of it:
+    # with the self-tuning bank, also the noise it reads from a group whose joints that message split
+    # (the message held b without a and c: the group's noise is then read from a and c alone), and its
+    # models' scores (2e-2 of the signal's scale at most).
     nan_stamp = extra[350][0]
     assert [e.stamp_ns for e in dirty if e.stamp_ns != nan_stamp] == [e.stamp_ns for e in clean]
     clean_by_stamp = {e.stamp_ns: e for e in clean}
@@ -82,7 +85,7 @@ def test_strays_mixed_into_a_good_stream_change_no_good_estimate(settings: Strea
         np.testing.assert_array_equal(got.ready, expected.ready)
         near = abs(got.stamp_ns - nan_stamp) < 0.3 * 10**9
         after = settings.method == "kalman" and got.stamp_ns > nan_stamp
-        tolerance = (1e-2 if near else 1e-5 if after else 1e-9) * max(1.0, np.abs(expected.accelerations).max())
+        tolerance = (2e-2 if after else 1e-2 if near else 1e-9) * max(1.0, np.abs(expected.accelerations).max())
         difference = np.abs(np.nan_to_num(got.accelerations) - np.nan_to_num(expected.accelerations))
         assert np.all(difference <= tolerance), (got, expected)
     assert len(log.lines) <= 12, "\n".join(m for _, m in log.lines)

@@ -74,7 +74,7 @@ class KalmanBank:
         self.scores: np.ndarray | None = None
         self.known_scores = known_scores  # (models, joints): the weights before a restart, as log-weights
         self._last: int | None = None
-        self._interval: float | None = None  # s: the usual interval between samples
+        self._intervals: deque[float] = deque(maxlen=16)  # s: the last intervals between samples
         self._positions: deque[np.ndarray] = deque(maxlen=NOISE_WINDOW)
         self._velocities: deque[np.ndarray] = deque(maxlen=NOISE_WINDOW)
         self._steps: dict[str, np.ndarray] = {}  # the smallest change seen so far, per joint: an encoder's step
@@ -86,7 +86,9 @@ class KalmanBank:
 
     def add(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> None:
         """One sample of every joint (see :meth:`KalmanTrack.add`)."""
-        if self._last is not None and self._interval is not None and (stamp - self._last) / NS > 3.0 * self._interval:
+        usual = float(np.median(self._intervals)) if len(self._intervals) >= 4 else None
+        silence = self._last is not None and usual is not None and (stamp - self._last) / NS > 3.0 * usual
+        if silence:
             # A silence: differences across it are motion, not noise. Read the noise afresh after it,
             # with what was read before it meanwhile.
             self.known_noise = {kind: self.read_noise.get(kind, known) for kind, known in self.known_noise.items()}
@@ -98,12 +100,12 @@ class KalmanBank:
             self.scores = likelihoods if self.known_scores is None else likelihoods + self.known_scores
         else:
             step = (stamp - self._last) / NS
-            if self._interval is None or step <= 3.0 * self._interval:
+            if not silence:
                 decay = math.exp(-step / MEMORY)
                 self.scores = decay * self.scores + likelihoods
             # else: the first sample after a silence: how far each model drifted over it says little
             # about how well it follows the motion, and would hand the estimate to the fastest.
-            self._interval = step if self._interval is None else min(step, 0.9 * self._interval + 0.1 * step)
+            self._intervals.append(step)
         self._last = stamp
 
     def weights(self) -> np.ndarray:
@@ -152,14 +154,14 @@ class KalmanBank:
         bank.tracks = [track.select(columns) for track in self.tracks]
         bank.scores = None if self.scores is None else self.scores[:, columns]
         bank._last = self._last
-        bank._interval = self._interval
+        bank._intervals = deque(self._intervals, maxlen=16)
         bank._positions = deque((p[columns] for p in self._positions), maxlen=NOISE_WINDOW)
         bank._velocities = deque((v[columns] for v in self._velocities), maxlen=NOISE_WINDOW)
         bank._steps = {k: v[columns] for k, v in self._steps.items()}
         return bank
 
     def _noise(self, kind: str, samples: deque[np.ndarray], fallback: float) -> float:
-        """A measurement variance for the whole group: the largest of its joints' (white noise, or an
+        """A measurement variance for the whole group: the median of its joints' (white noise, or an
         encoder's step / sqrt(12)), from the samples kept; the fallback's until there are 32. The
         step is the smallest change seen since the start, kept through dwells (where no sample
         changes and the recent samples alone would say nothing)."""
@@ -176,7 +178,7 @@ class KalmanBank:
         self._steps[kind] = seen
         known = np.where(np.isfinite(seen), seen, 0.0)
         variance = np.maximum(white**2, known**2 / 12.0)
-        found = float(max(np.max(variance), (fallback * 1e-4) ** 2))
+        found = float(max(np.median(variance), (fallback * 1e-4) ** 2))
         self.read_noise[kind] = found
         return found
 

@@ -204,6 +204,14 @@ def _root_state(gravity: tuple[float, ...]) -> tuple[float, ...]:
     return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -gx, -gy, -gz)
 
 
+def root_rows(root: Sequence[Any], count: int, single: bool) -> np.ndarray:
+    """The root's state as the compiled kernels take it: one row of 12 (one sample, or the same for
+    every sample), else (count, 12)."""
+    if single or not isinstance(root[0], np.ndarray):
+        return np.array(root, dtype=float)
+    return np.stack([np.broadcast_to(r, (count,)) for r in root], axis=1)
+
+
 def kinematics_table(
     model: RobotModel, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, root: Sequence[Any]
 ) -> np.ndarray:
@@ -218,11 +226,7 @@ def kinematics_table(
     native = kernel.compiled()
     if native is not None:  # the same arithmetic, compiled: the same numbers, faster
         count = 1 if single else q.shape[0]
-        if single or not isinstance(root[0], np.ndarray):
-            root_rows = np.array(root, dtype=float)
-        else:
-            root_rows = np.stack([np.broadcast_to(r, (count,)) for r in root], axis=1)
-        table = native([q, qd, qdd, root_rows], count)
+        table = native([q, qd, qdd, root_rows(root, count, single)], count)
         return table.reshape(n_links, ROW) if single else table.reshape(count, n_links, ROW)
     started = time.perf_counter()
     if single:

@@ -29,6 +29,7 @@ from neforward_ros.kinematics.forward import (
     check_gravity,
     check_joint_arrays,
     packer_of,
+    root_rows,
     root_state,
 )
 from neforward_ros.kinematics.forward_kernel import SLICES
@@ -148,13 +149,9 @@ def _run_dynamics(model, states, root, external) -> np.ndarray:
     native = kernel.compiled()
     if native is not None:  # the same arithmetic, compiled: the same numbers, faster
         count = 1 if single else q.shape[0]
-        if single or not isinstance(root[0], np.ndarray):
-            root_rows = np.array(root, dtype=float)
-        else:
-            root_rows = np.stack([np.broadcast_to(r, (count,)) for r in root], axis=1)
         fext = None if external is None else external.reshape(count, -1)
         values = native([np.asarray(q, dtype=float), np.asarray(qd, dtype=float), np.asarray(qdd, dtype=float),
-                         root_rows, fext], count)  # fmt: skip
+                         root_rows(root, count, single), fext], count)  # fmt: skip
         return values[0] if single else values
     started = time.perf_counter()
     if single:

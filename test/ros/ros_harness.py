@@ -66,12 +66,14 @@ def sourced(scripts: list[Path], base: dict[str, str]) -> dict[str, str]:
 
 def ros_python(environment: dict[str, str]) -> str:
     """The Python that ROS 2 runs on, with the package's dependencies: NEFORWARD_ROS_PYTHON (``make
-    test`` sets it to its .venv-ros), else this interpreter when it can import rclpy (``colcon test``),
-    else Debian's python3."""
+    test`` sets it to its .venv-ros), else this interpreter when it can import rclpy and colcon
+    (``colcon test``), else Debian's python3."""
     chosen = os.environ.get("NEFORWARD_ROS_PYTHON")
     if chosen:
         return chosen
-    probe = subprocess.run([sys.executable, "-c", "import rclpy"], env=environment, capture_output=True, check=False)
+    probe = subprocess.run(
+        [sys.executable, "-c", "import rclpy, colcon_core"], env=environment, capture_output=True, check=False
+    )
     return sys.executable if probe.returncode == 0 else "/usr/bin/python3"
 
 
