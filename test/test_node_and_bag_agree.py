@@ -37,10 +37,12 @@ PARAMETERS = {
     "contact.thresholds": [6.0, 6.0],
     "accel_links": ["rf_foot"],
     "imu_links": ["trunk"],
+    "publish_joint_estimates": True,
 }
 FLAGS = [
     "--base", "imu", "--world-frame", "world", "--torques", "--wrench-links", "lf_foot",
     "--contact", "lf_hfe=6.0", "--contact", "rh_kfe=6.0", "--accel-links", "rf_foot", "--imu-links", "trunk",
+    "--joint-estimates",
 ]  # fmt: skip
 
 
@@ -141,7 +143,7 @@ def test_the_node_and_the_bag_tool_agree_stamp_by_stamp(recording, tmp_path, fla
         "/neforward/world_link_states": topics.LINK_STATES_TYPE, "/neforward/joint_torques": topics.JOINT_STATE_TYPE,
         "/neforward/external_torques": topics.JOINT_STATE_TYPE, "/neforward/lf_foot/wrench": topics.WRENCH_TYPE,
         "/neforward/rf_foot/accel": topics.ACCEL_TYPE, "/neforward/rf_foot/twist": topics.TWIST_TYPE,
-        "/neforward/trunk/imu": topics.IMU_TYPE,
+        "/neforward/trunk/imu": topics.IMU_TYPE, "/neforward/joint_estimates": topics.JOINT_TRAJECTORY_TYPE,
     }  # fmt: skip
     assert set(types) | {contact} <= set(bag) and set(bag) <= set(node), (sorted(bag), sorted(node))
     for topic, kind in types.items():

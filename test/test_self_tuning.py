@@ -205,3 +205,54 @@ def test_the_virtual_imu_carries_the_acceleration_covariance() -> None:
             np.testing.assert_allclose(covariance, covariance.T, atol=1e-15)
         else:
             assert not covariance.any()  # all zero: unknown, as sensor_msgs/Imu defines it
+
+
+def test_joint_estimates_publish_each_acceleration_and_its_deviation() -> None:
+    """~/joint_estimates (publish_joint_estimates): per joint the acceleration the result comes from and
+    its standard deviation, which covers its error against the analytic truth as the estimator's own
+    does; the bytes every runtime publishes decode to the same; a fixed window states none."""
+    from neforward_ros import load_model
+    from neforward_ros.interface.encoder import Encoder
+    from neforward_ros.interface.topics import JOINT_ESTIMATES, JOINT_TRAJECTORY_TYPE
+    from neforward_ros.node.pipeline import Pipeline
+    from neforward_ros.parameters.settings import node_settings
+    from neforward_ros.wire.rostypes import deserialize
+
+    urdf = (CONFIG_DIR / "panda.urdf").read_text()
+    names = list(load_model(urdf).joint_names)
+    rng = np.random.default_rng(41)
+    count = 2400
+    t = (np.arange(count) + rng.uniform(-0.05, 0.05, count)) / 600.0
+    shifts = np.linspace(0.0, 2.0, len(names))
+    q = np.stack([chirp(t, 1.2, s)[0] for s in shifts], axis=1) + rng.normal(0.0, 2e-4, (count, len(names)))
+    truth = np.stack([chirp(t, 1.2, s)[1] for s in shifts], axis=1)
+    stamps = EPOCH_NS + np.round(t * 1e9).astype(np.int64)
+    for adaptive in (True, False):
+        settings = node_settings({"robot_description": urdf, "publish_joint_estimates": True,
+                                  "estimator.adaptive": adaptive})  # fmt: skip
+        pipeline, encoder = Pipeline(settings, log=LogRecorder()), Encoder(settings)
+        found = []
+        for k in range(count):
+            for result in pipeline.on_joint_state(int(stamps[k]), names, q[k].tolist()):
+                contents = dict(pipeline.messages(result))[JOINT_ESTIMATES]
+                data = dict(encoder.encode(result))[JOINT_ESTIMATES]
+                found.append((result.stamp_ns, contents, deserialize(JOINT_TRAJECTORY_TYPE, data)))
+        assert len(found) > count * 0.9
+        stamp, contents, decoded = found[len(found) // 2]
+        assert decoded["joint_names"] == names == contents["joint_names"]
+        (point,) = decoded["points"]
+        np.testing.assert_array_equal(point["accelerations"], contents["points"][0]["accelerations"])
+        assert decoded["header"]["stamp"]["sec"] * 10**9 + decoded["header"]["stamp"]["nanosec"] == stamp
+        index = np.searchsorted(stamps, [s for s, _, _ in found])
+        estimate = np.array([c["points"][0]["accelerations"] for _, c, _ in found])
+        spread = [c["points"][0]["effort"] for _, c, _ in found]
+        keep = (t[index] > 1.0) & (t[index] < t[-1] - 0.5)
+        error = np.abs(estimate - truth[index])[keep]
+        assert np.sqrt(np.mean(error**2) / np.mean(truth[index][keep] ** 2)) < 0.05
+        if adaptive:
+            sigma = np.array(spread)[keep]
+            assert sigma.shape == error.shape and np.all(sigma > 0)
+            assert np.mean(error <= 3.0 * sigma) >= 0.9, np.mean(error <= 3.0 * sigma)
+            assert np.median(error / sigma) >= 0.05  # a bound that says something
+        else:
+            assert all(s == [] for s in spread)  # a fixed window states none

@@ -86,6 +86,12 @@ def add_bag_arguments(bag: argparse.ArgumentParser) -> None:
     shorthands.add_argument(
         "--torques", action="store_true", default=None, help="publish_torques: joint_torques and external_torques"
     )
+    shorthands.add_argument(
+        "--joint-estimates",
+        action="store_true",
+        default=None,
+        help="publish_joint_estimates: joint_estimates (q, qd, qdd used, and each qdd's standard deviation)",
+    )
     shorthands.add_argument("--wrench-links", help="wrench_links, comma-separated: links with a wrench topic")
     shorthands.add_argument(
         "--effort",
@@ -138,6 +144,7 @@ def _shorthand_values(args: argparse.Namespace) -> dict[str, Any]:
         ("mode", "estimator.mode"),
         ("publish_policy", "publish_policy"),
         ("torques", "publish_torques"),
+        ("joint_estimates", "publish_joint_estimates"),
         ("contact_debounce", "contact.debounce"),
         ("base", "base.source"),
         ("base_link", "base.link"),

@@ -39,6 +39,7 @@ def output_topics(options: BagOptions) -> list[tuple[str, str]]:
         bool(settings.contact_thresholds),
         settings.world_states,
         bool(settings.contact_link),
+        settings.publish_joint_estimates,
     )
     return [(names.resolve(o.topic), o.type) for o in outputs]
 
@@ -94,7 +95,10 @@ class RecordingWriter:
             )
         ]
         world = settings.world_states
-        per_sample = bool(settings.accel_links or settings.imu_links or options.dynamics_needed or world)
+        per_sample = bool(
+            settings.accel_links or settings.imu_links or options.dynamics_needed or world
+            or settings.publish_joint_estimates
+        )  # fmt: skip
         if not per_sample and _FAST_MCAP and fast_mcap_allowed() and _write_rows_mcap(self.writer, streams, log_times):
             return
         times = log_times.tolist()

@@ -36,7 +36,7 @@ from neforward_ros.computation.contact import ContactDetector
 from neforward_ros.computation.inputs import JointStates, LinkMotion
 from neforward_ros.computation.observer import ObserverState, RawStates, observe
 from neforward_ros.computation.policy import apply_policy, hold_vector
-from neforward_ros.computation.result import Dynamics, Observation, Result, make_result
+from neforward_ros.computation.result import Dynamics, JointMotion, Observation, Result, make_result
 from neforward_ros.kinematics.effort_model import EffortModel
 from neforward_ros.kinematics.forward import kinematics_table, root_state
 from neforward_ros.kinematics.forward_kernel import SLICES
@@ -187,6 +187,13 @@ def compute(
     if settings.imu_links and states.acceleration_std is not None:
         spread = states.acceleration_std if single or rows is None else states.acceleration_std[rows]
         result = replace(result, imu_covariance=imu_covariances(model, table, spread, settings.imu_links))
+    if settings.publish_joint_estimates:
+        spread = states.acceleration_std
+        if spread is None:
+            spread = np.full_like(q, np.nan)
+        elif not single and rows is not None:
+            spread = spread[rows]
+        result = replace(result, joints=JointMotion(model.joint_names, q, qd, qdd, spread, known))
     if world is not None and (not single or np.isfinite(world[0]).all()):
         result = replace(result, world=world)
     if settings.dynamics_needed and (not single or determined is None):

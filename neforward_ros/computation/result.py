@@ -49,6 +49,35 @@ _DYNAMICS_FIELDS = ("positions", "velocities", "torques", "external", "force", "
 
 
 @dataclass(frozen=True)
+class JointMotion:
+    """The joint states a result was computed from, one stamp or (a leading sample axis) many: what
+    ~/joint_estimates publishes.
+
+    Attributes:
+        joint_names: the model's joint columns.
+        positions, velocities, accelerations: (..., n) rad, rad/s, rad/s^2 (m, m/s, m/s^2 for a
+            prismatic joint), as estimated (or supplied, or held by the publish policy).
+        acceleration_std: (..., n) the estimator's standard deviation of each acceleration, same
+            units; NaN where it states none (a fixed window, supplied states).
+        known: (..., n) whether each joint's state is an estimate (or supplied, or held).
+    """
+
+    joint_names: tuple[str, ...]
+    positions: np.ndarray
+    velocities: np.ndarray
+    accelerations: np.ndarray
+    acceleration_std: np.ndarray
+    known: np.ndarray
+
+    def part(self, index: Any) -> JointMotion:
+        """The samples ``index`` (an int, a slice or an index array) of a batch."""
+        return JointMotion(self.joint_names, *(getattr(self, name)[index] for name in _MOTION_FIELDS))
+
+
+_MOTION_FIELDS = ("positions", "velocities", "accelerations", "acceleration_std", "known")
+
+
+@dataclass(frozen=True)
 class Observation:
     """The momentum observer's output (:mod:`neforward_ros.computation.observer`) at one raw sample's
     stamp, or (a leading sample axis) at many: what ~/external_torques, ~/contact and
@@ -124,6 +153,7 @@ class Result:
             when the base source gives orientation (a zero position when it gives none).
         imu_covariance: per ``imu_links`` link, the covariance of its linear acceleration (..., 3, 3),
             link frame, m^2/s^4, from the joints' acceleration uncertainty; NaN where unknown.
+        joints: the joint states the result was computed from, with ``publish_joint_estimates``.
     """
 
     stamp_ns: Any
@@ -136,6 +166,7 @@ class Result:
     contact: Any = None
     world: tuple[np.ndarray, np.ndarray] | None = None
     imu_covariance: Mapping[str, np.ndarray] | None = None
+    joints: JointMotion | None = None
 
     @property
     def ids(self) -> tuple[int, ...]:
@@ -178,6 +209,7 @@ class Result:
                 imu_covariance=None
                 if self.imu_covariance is None
                 else {k: v[part] for k, v in self.imu_covariance.items()},
+                joints=None if self.joints is None else self.joints.part(part),
             )
             out.append((part, run.only(self.determined[start])))
         return out
@@ -220,6 +252,7 @@ class Result:
             imu_covariance=None
             if self.imu_covariance is None
             else {k: v[index] for k, v in self.imu_covariance.items()},
+            joints=None if self.joints is None else self.joints.part(index),
         )
         if "blocks" in self.__dict__:
             sample.__dict__["blocks"] = tuple(tuple(b[index] for b in blocks) for blocks in self.blocks)

@@ -40,12 +40,16 @@ import math
 
 import numpy as np
 
+from neforward_ros.estimation.fit import block_fits, polynomial_fits
+
 GAMMA = 4.0
 """Half-width of each confidence interval, in standard deviations."""
 RATIO = math.sqrt(2.0)
 """Between consecutive half-widths of the ladder."""
 LEVELS = 10
 """Half-widths tried at most."""
+BLOCK = 2048
+"""Targets fitted together by :func:`adaptive_fits`."""
 ROUGHNESS = 0.01
 """The noise, relative to the samples' spread in the largest window, above which an estimate strains."""
 _SIXTH = math.sqrt(2.0 / math.pi) * math.sqrt(924.0)  # mean |N(0, 1)| times the sixth difference's gain
@@ -62,11 +66,12 @@ def noise_of(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = values.shape[1]
     if len(values) < 8:
         return np.zeros(n), np.zeros(n)
-    sixth = np.diff(values, 6, axis=0)
-    white = np.mean(np.abs(sixth), axis=0) / _SIXTH
-    steps = np.abs(np.diff(values, axis=0))
-    moving = np.where(steps > 0.0, steps, np.inf)
-    step = np.min(moving, axis=0)
+    first = values[1:] - values[:-1]
+    sixth = np.diff(first, 5, axis=0)
+    white = np.add.reduce(np.abs(sixth), axis=0) * (1.0 / (len(sixth) * _SIXTH))
+    steps = np.abs(first)
+    steps[steps == 0.0] = np.inf
+    step = np.minimum.reduce(steps, axis=0)
     return white, np.where(np.isfinite(step), step, 0.0)
 
 
@@ -93,7 +98,7 @@ def accel_std(
     ``count`` samples in the window, ``travel`` the distance the joint moved across it."""
     quantisation = step**2 / 12.0
     crossings = np.where(step > 0.0, travel / np.where(step > 0.0, step, 1.0), count)
-    independent = np.clip(crossings, 1.0, np.maximum(count, 1.0))
+    independent = np.minimum(np.maximum(crossings, 1.0), np.maximum(count, 1.0))
     effective = np.maximum(white**2, quantisation * count / independent)
     return np.sqrt(np.maximum(variance, 0.0) * effective)
 
@@ -136,27 +141,56 @@ def adaptive_fits(
         order: polynomial degree.
         lead: the largest reach past the target, s (h_max for a centred fit, 0 for a causal one).
     """
-    from neforward_ros.estimation.fit import polynomial_fits
-
     levels = ladder(h_max)
-    fits = [polynomial_fits(t, y, targets, h, order, _lead(h, lead), variance=True) for h in levels]
-    needed = order + 3
-    valid = np.stack([f[5] >= needed for f in fits])[:, :, None]
     first_lead = _lead(levels[0], lead)
     lo = np.searchsorted(t, targets + first_lead - 2.0 * levels[0], side="left")
     hi = np.searchsorted(t, targets + first_lead, side="right")
     white, step = _window_noise(y, lo, hi)
+    out = [np.empty((len(targets), y.shape[1])) for _ in range(4)]
+    for start in range(0, len(targets), BLOCK):  # a block of targets at a time: its levels stay in cache
+        part = slice(start, start + BLOCK)
+        chosen = _block_fits(t, y, targets[part], levels, order, lead, derivative, white[part], step[part])
+        for whole, level in zip(out, chosen, strict=True):
+            whole[part] = level
+    return out[0], out[1], out[2], out[3]
+
+
+def _block_fits(
+    t: np.ndarray,
+    y: np.ndarray,
+    targets: np.ndarray,
+    levels: np.ndarray,
+    order: int,
+    lead: float,
+    derivative: int,
+    white: np.ndarray,
+    step: np.ndarray,
+) -> list[np.ndarray]:
+    """:func:`adaptive_fits` for a block of targets, with their windows' noise: value, first and
+    second derivative, and the chosen derivative's standard deviation (M, n). Levels whose window
+    is too small at every target of the block are not fitted."""
+    needed = order + 3
+    fits = []
+    for h in levels:
+        level_lead = _lead(h, lead)
+        counts = np.searchsorted(t, targets + level_lead, side="right") - np.searchsorted(
+            t, targets + level_lead - 2.0 * h, side="left"
+        )
+        if fits and not np.any(counts >= needed):
+            break  # smaller windows hold fewer samples still
+        fits.append(polynomial_fits(t, y, targets, h, order, level_lead, variance=True))
+    used = levels[: len(fits)]
+    valid = np.stack([f[5] >= needed for f in fits])[:, :, None]
     speed = np.abs(fits[0][1])
     estimates = np.stack([f[derivative] for f in fits])
     stds = np.stack([
         accel_std(f[2 + derivative][:, None], white, step, f[5][:, None], speed * 2.0 * h)
-        for f, h in zip(fits, levels, strict=True)
+        for f, h in zip(fits, used, strict=True)
     ])  # fmt: skip
-    valid = np.broadcast_to(valid, estimates.shape)
-    chosen, _ = select(estimates, stds, valid)
+    chosen, _ = select(estimates, stds, np.broadcast_to(valid, estimates.shape))
     pick = chosen[None]
-    out = [np.take_along_axis(np.stack([f[i] for f in fits]), pick, 0)[0] for i in range(3)]
-    return out[0], out[1], out[2], np.take_along_axis(stds, pick, 0)[0]
+    picked = [np.take_along_axis(np.stack([f[i] for f in fits]), pick, 0)[0] for i in range(3)]
+    return [*picked, np.take_along_axis(stds, pick, 0)[0]]
 
 
 def adaptive_fit(
@@ -183,38 +217,30 @@ def adaptive_fit(
     white, step = noise_of(values[lo[0] : hi[0]])
     counts = (hi - lo).astype(float)
     valid = counts >= order + 3
-    width = int(np.max(hi - lo))
-    index = lo[:, None] + np.arange(width)
-    inside = index < hi[:, None]
-    index = np.minimum(index, len(times) - 1)
-    tau = (times[index] - target) / levels[:, None]
-    powers = np.empty((len(levels), order + 1, width))
-    powers[:, 0, :] = inside
-    for power in range(1, order + 1):
-        np.multiply(powers[:, power - 1, :], tau, out=powers[:, power, :])
-    gram = powers @ powers.transpose(0, 2, 1)
-    gram[~valid] = np.eye(order + 1)  # a window too small to use: anything solvable
-    coefficients = np.linalg.solve(gram, powers @ values[index])  # (L, order + 1, n)
-    inverse = np.linalg.inv(gram)
-    value = coefficients[:, 0]
-    d1 = coefficients[:, 1] / levels[:, None]
-    d2 = 2.0 * coefficients[:, 2] / levels[:, None] ** 2
-    var1 = inverse[:, 1, 1] / levels**2
-    var2 = 4.0 * inverse[:, 2, 2] / levels**4
+    window = values[lo[0] : hi[0]]  # the largest window holds every other level's
+    offsets = np.arange(hi[0] - lo[0])
+    # A level with too few samples is fitted like the largest (the caller's support guarantees that
+    # one enough) and never chosen.
+    scale = np.where(valid, levels, levels[0])
+    start, end = np.where(valid, lo, lo[0]) - lo[0], np.where(valid, hi, hi[0]) - lo[0]
+    inside = (offsets >= start[:, None]) & (offsets < end[:, None])
+    tau = (times[lo[0] : hi[0]] - target) / scale[:, None]
+    value, d1, d2, var1, var2 = block_fits(tau, inside, window, scale, order)
     second = derivative == 2
     estimates = np.where(second, d2, d1)
     variance = np.where(second, var2[:, None], var1[:, None])
     speed = np.abs(d1[0])
     stds = accel_std(variance, white, step, counts[:, None], speed * 2.0 * levels[:, None])
     chosen, _ = select(estimates, stds, np.broadcast_to(valid[:, None], estimates.shape))
-    pick = chosen[None]
-    smallest = np.max(np.flatnonzero(valid)) if valid.any() else 0
-    window = values[lo[0] : hi[0]]
-    rough = white > ROUGHNESS * np.std(window, axis=0) if len(window) > 1 else np.zeros(values.shape[1], bool)
+    columns = np.arange(values.shape[1])
+    smallest = max(int(np.count_nonzero(valid)) - 1, 0)  # the windows are nested: valid ones come first
+    centred = window - np.add.reduce(window, axis=0) * (1.0 / len(window))
+    spread = np.sqrt(np.einsum("ij,ij->j", centred, centred) * (1.0 / len(window)))  # the samples' deviation
+    rough = white > ROUGHNESS * spread
     return (
-        np.take_along_axis(value, pick, 0)[0],
-        np.take_along_axis(d1, pick, 0)[0],
-        np.take_along_axis(d2, pick, 0)[0],
-        np.take_along_axis(stds, pick, 0)[0],
+        value[chosen, columns],
+        d1[chosen, columns],
+        d2[chosen, columns],
+        stds[chosen, columns],
         ((chosen == smallest) & (smallest > 0)) | rough,
     )

@@ -18,7 +18,9 @@ DEFAULT_WINDOW = 0.2
 DEFAULT_ORDER = 4
 """Degree of the local polynomial."""
 
-_CHUNK = 4096  # targets per vectorised block: bounds memory at about CHUNK * window samples
+_CHUNK = 2048  # targets per vectorised block: bounds memory (about 2 order + 1 + n numbers per target and
+# window sample) and keeps a block in cache
+_ELEMENTWISE = 256  # matrices from which spd_inverse beats numpy.linalg.inv
 
 
 def local_polynomial(
@@ -84,23 +86,65 @@ def polynomial_fits(
         inside = index < hi[block, None]
         index = np.minimum(index, count - 1)
         tau = (t[index] - targets[block, None]) / half_width
-        powers = np.empty((len(tau), degree + 1, width))  # tau^0 .. tau^degree per sample, 0 outside
-        powers[:, 0, :] = inside
-        for power in range(1, degree + 1):
-            np.multiply(powers[:, power - 1, :], tau, out=powers[:, power, :])
-        gram = powers @ powers.transpose(0, 2, 1)
-        moments = powers @ y[index]
-        coefficients = np.linalg.solve(gram, moments)  # (M, degree + 1, n)
-        value[block] = coefficients[:, 0]
-        d1[block] = coefficients[:, 1] / half_width
-        d2[block] = 2.0 * coefficients[:, 2] / half_width**2 if degree >= 2 else 0.0
-        if variance:
-            inverse = np.linalg.inv(gram)
-            var1[block] = inverse[:, 1, 1] / half_width**2
-            var2[block] = 4.0 * inverse[:, 2, 2] / half_width**4 if degree >= 2 else np.inf
+        fit = block_fits(tau, inside, y[index], half_width, degree)
+        value[block], d1[block], d2[block], var1[block], var2[block] = fit
     if not variance:
         return value, d1, d2
     return value, d1, d2, var1, var2, (hi - lo).astype(float)
+
+
+def block_fits(
+    tau: np.ndarray, inside: np.ndarray, values: np.ndarray, half_width: np.ndarray | float, degree: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Least-squares fits of a polynomial of ``degree`` in tau, one per row of tau (B, W): the
+    samples where ``inside`` (B, W) is false count for nothing. ``values`` (B, W, n), or (W, n)
+    shared by every row; ``half_width`` (B,) or a float, s, the unit of tau. Returns the value, first
+    and second derivative at tau = 0 (B, n) and the variance factors of the first and second
+    derivative for unit white noise (B,) (the second's is inf below degree 2).
+
+    The normal equations' matrix is a Hankel matrix of the sums of tau^0 .. tau^(2 degree), formed
+    from those sums; only the inverse's first three rows are applied to the moments."""
+    powers = np.empty((2 * degree + 1, *tau.shape))  # tau^k per sample, 0 outside the window
+    powers[0] = inside
+    for power in range(1, 2 * degree + 1):
+        np.multiply(powers[power - 1], tau, out=powers[power])
+    sums = powers @ np.ones(tau.shape[-1])  # (2 degree + 1, B): a matrix-vector product sums fastest
+    k = np.arange(degree + 1)
+    gram = sums[k[:, None] + k[None, :]].transpose(2, 0, 1)  # (B, degree + 1, degree + 1)
+    moments = powers[: degree + 1].transpose(1, 0, 2) @ values  # (B, degree + 1, n)
+    inverse = spd_inverse(gram) if len(gram) >= _ELEMENTWISE else np.linalg.inv(gram)
+    rows = min(degree, 2) + 1
+    coefficients = inverse[:, :rows] @ moments
+    scale = np.asarray(half_width, dtype=float)
+    column = scale[:, None] if scale.ndim else scale
+    d1 = coefficients[:, 1] / column
+    if degree >= 2:
+        d2 = 2.0 * coefficients[:, 2] / column**2
+        var2 = 4.0 * inverse[:, 2, 2] / scale**4
+    else:
+        d2, var2 = np.zeros_like(d1), np.full(len(tau), np.inf)
+    return coefficients[:, 0], d1, d2, inverse[:, 1, 1] / scale**2, var2
+
+
+def spd_inverse(matrices: np.ndarray) -> np.ndarray:
+    """The inverse of each symmetric positive definite matrix of (B, d, d), by a Cholesky
+    factorisation written out elementwise over B: for many small matrices, several times faster than
+    LAPACK's one call per matrix. A matrix that is not positive definite to rounding gets NaN."""
+    d = matrices.shape[-1]
+    entries = np.moveaxis(matrices, 0, -1)  # (d, d, B)
+    low = np.zeros(entries.shape)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        for j in range(d):
+            pivot = entries[j, j] - np.einsum("kb,kb->b", low[j, :j], low[j, :j])
+            np.sqrt(pivot, out=low[j, j])
+            below = entries[j + 1 :, j] - np.einsum("ikb,kb->ib", low[j + 1 :, :j], low[j, :j])
+            low[j + 1 :, j] = below / low[j, j]
+        inverse_low = np.zeros(entries.shape)  # the lower factor's inverse, row by row
+        for i in range(d):
+            inverse_low[i, i] = 1.0 / low[i, i]
+            if i:
+                inverse_low[i, :i] = -np.einsum("kb,kjb->jb", low[i, :i], inverse_low[:i, :i]) * inverse_low[i, i]
+    return np.einsum("kib,kjb->bij", inverse_low, inverse_low)
 
 
 def check_settings(method: str, window: float, order: int) -> None:

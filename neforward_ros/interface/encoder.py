@@ -64,7 +64,7 @@ class Encoder:
         self._types = {output.topic: output.type for output in output_list(
             settings.accel_links, settings.imu_links, settings.publish_markers, settings.publish_torques,
             settings.wrench_links, bool(settings.contact_thresholds), bool(settings.world_frame),
-            bool(settings.contact_link),
+            bool(settings.contact_link), settings.publish_joint_estimates,
         )}  # fmt: skip
         self.templates = Templates(settings.frame_prefix)
 

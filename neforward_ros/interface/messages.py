@@ -14,6 +14,8 @@ Frames and points (see the README topic table):
 - <link>/accel, <link>/twist: the link origin's, in the link frame.
 - <link>/imu: angular velocity and specific force in the link frame; orientation of the link in
   the root frame.
+- joint_estimates (trajectory_msgs/JointTrajectory): the joint states a result comes from, one point,
+  and each acceleration's standard deviation in the point's ``effort``.
 - joint_torques, external_torques (sensor_msgs/JointState): the model's joint torques, and measured
   effort minus them, with the joint states they come from.
 - <link>/wrench: what the link receives through its parent joint, link frame, about its origin.
@@ -39,6 +41,7 @@ from neforward_ros.interface.topics import (
     CONTACT,
     CONTACT_WRENCH,
     EXTERNAL_TORQUES,
+    JOINT_ESTIMATES,
     JOINT_TORQUES,
     LINK_STATES,
     MARKERS,
@@ -305,10 +308,40 @@ def dynamics_messages(
     return out
 
 
+def joint_estimates(result: Result) -> Message | None:
+    """trajectory_msgs/JointTrajectory, one point: ``joint_names`` = the joint columns that have a state
+    at this stamp; ``positions``, ``velocities``, ``accelerations`` = the states the result comes from
+    (rad, rad/s, rad/s^2; m, m/s, m/s^2 for a prismatic joint; estimated, supplied or held); ``effort``
+    = each acceleration's standard deviation as the estimator states it (same units as the
+    accelerations; NaN for a joint it states none for), empty when it states none at all (a fixed
+    window, supplied states). ``time_from_start`` is zero: the point is at ``header.stamp``. None
+    without joint states (``publish_joint_estimates`` off) or when no joint has one."""
+    joints = result.joints
+    if joints is None:
+        return None
+    keep = np.flatnonzero(joints.known)
+    if len(keep) == 0:
+        return None
+    spread = joints.acceleration_std[keep]
+    return {
+        "header": header(result.stamp_ns, ""),
+        "joint_names": [joints.joint_names[k] for k in keep],
+        "points": [
+            {
+                "positions": joints.positions[keep].tolist(),
+                "velocities": joints.velocities[keep].tolist(),
+                "accelerations": joints.accelerations[keep].tolist(),
+                "effort": spread.tolist() if np.isfinite(spread).any() else [],
+            }
+        ],
+    }
+
+
 def per_link_messages(
     result: Result, accel_links: Sequence[str], imu_links: Sequence[str], frame_prefix: str
 ) -> list[tuple[str, Message]]:
-    """(topic, contents) of the per-link outputs of one result, in :func:`output_list` order.
+    """(topic, contents) of the per-link outputs of one result and of its joint estimates, in
+    :func:`output_list` order.
 
     Links the result's model does not have are left out (the pipeline logs them once).
     """
@@ -321,6 +354,9 @@ def per_link_messages(
     for link in imu_links:
         if link in result.link_names:
             out.append((imu_topic(link), imu(result, result.link_names.index(link), frame_prefix)))
+    joints = joint_estimates(result)
+    if joints is not None:
+        out.append((JOINT_ESTIMATES, joints))
     return out
 
 

@@ -12,6 +12,7 @@ LINK_STATES = "~/link_states"
 COM_STATES = "~/com_states"
 MARKERS = "~/markers"
 JOINT_TORQUES = "~/joint_torques"
+JOINT_ESTIMATES = "~/joint_estimates"
 EXTERNAL_TORQUES = "~/external_torques"
 CONTACT = "~/contact"
 CONTACT_WRENCH = "~/contact_wrench"
@@ -49,15 +50,19 @@ def output_list(
     contact: bool = False,
     world: bool = False,
     contact_wrench: bool = False,
+    joint_estimates: bool = False,
 ) -> list[Output]:
     """The node's outputs, relative names: link_states, com_states, world_link_states, per-link topics,
-    markers, joint torques, external torques, per-link wrenches, contact, contact wrench."""
+    joint estimates, markers, joint torques, external torques, per-link wrenches, contact, contact
+    wrench."""
     out = [Output(LINK_STATES, LINK_STATES_TYPE), Output(COM_STATES, LINK_STATES_TYPE)]
     if world:
         out.append(Output(WORLD_LINK_STATES, LINK_STATES_TYPE))
     for link in accel_links:
         out += [Output(accel_topic(link), ACCEL_TYPE), Output(twist_topic(link), TWIST_TYPE)]
     out += [Output(imu_topic(link), IMU_TYPE) for link in imu_links]
+    if joint_estimates:
+        out.append(Output(JOINT_ESTIMATES, JOINT_TRAJECTORY_TYPE))
     if publish_markers:
         out.append(Output(MARKERS, MARKERS_TYPE))
     if publish_torques:

@@ -170,6 +170,7 @@ class Pipeline:
             bool(settings.contact_thresholds),
             settings.world_states,
             bool(settings.contact_link),
+            settings.publish_joint_estimates,
         )
 
     def messages(self, result: Result | Observation) -> list[tuple[str, dict[str, Any]]]:

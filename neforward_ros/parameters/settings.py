@@ -41,6 +41,7 @@ class NodeSettings:
         publish_policy: "partial", "wait" or "hold".
         hold_positions: joint name -> position held under the "hold" policy (others: 0).
         publish_torques: whether ~/joint_torques and ~/external_torques are published.
+        publish_joint_estimates: whether ~/joint_estimates is published.
         effort_scale, effort_offset: joint name -> measured = scale * effort + offset (others 1, 0).
         friction: ``friction.*`` by field (coulomb, viscous, velocity_scale, stribeck,
             stribeck_velocity) -> joint name -> value (see
@@ -75,6 +76,7 @@ class NodeSettings:
     publish_policy: str = "partial"
     hold_positions: Mapping[str, float] = field(default_factory=dict)
     publish_torques: bool = False
+    publish_joint_estimates: bool = False
     effort_scale: Mapping[str, float] = field(default_factory=dict)
     effort_offset: Mapping[str, float] = field(default_factory=dict)
     friction: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
@@ -252,6 +254,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         publish_policy=merged["publish_policy"],
         hold_positions=hold_positions,
         publish_torques=merged["publish_torques"],
+        publish_joint_estimates=merged["publish_joint_estimates"],
         effort_scale=effort_scale,
         effort_offset=effort_offset,
         friction=friction,

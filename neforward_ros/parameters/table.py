@@ -148,6 +148,13 @@ PARAMETERS: tuple[Parameter, ...] = (
         "Publish ~/joint_torques (the model's) and ~/external_torques (measured effort - model) for every stamp "
         "where every joint has an estimate.",
     ),
+    Parameter(
+        "publish_joint_estimates",
+        "bool",
+        False,
+        "Publish ~/joint_estimates: the joint positions, velocities and accelerations each result comes from, "
+        "with each acceleration's standard deviation as the estimator states it.",
+    ),
     Parameter("effort.joint_names", "string[]", [], "Joints whose efforts are scaled and offset before use."),
     Parameter("effort.scale", "double[]", [], "Their scales (measured = scale * effort + offset), in that order."),
     Parameter("effort.offset", "double[]", [], "Their offsets, N m (N), in that order."),

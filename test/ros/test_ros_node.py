@@ -172,6 +172,7 @@ def test_joint_torques_external_torques_wrenches_and_contact(graph, tmp_path) ->
         "/neforward/external_torques": "sensor_msgs/msg/JointState",
         wrench: "geometry_msgs/msg/WrenchStamped",
         "/neforward/contact": "std_msgs/msg/Bool",
+        "/neforward/joint_estimates": "trajectory_msgs/msg/JointTrajectory",
     }
     names = list(MODEL.joint_names)
     node = graph.start(
@@ -180,6 +181,7 @@ def test_joint_torques_external_torques_wrenches_and_contact(graph, tmp_path) ->
             tmp_path,
             **panda_parameters(
                 publish_torques=True,
+                publish_joint_estimates=True,
                 wrench_links=[HAND],
                 **{"contact.joint_names": [names[1], names[3], names[5]], "contact.thresholds": [1.0, 1.0, 1.0]},
                 qos_overrides={topic: {"publisher": {"depth": 1000}} for topic in record},
@@ -210,6 +212,14 @@ def test_joint_torques_external_torques_wrenches_and_contact(graph, tmp_path) ->
     assert contact[inside].all() and not contact[(t[k] < 0.75) | (t[k] > 1.45)].any()
     assert len(received[wrench]) == 360 and received[wrench][0]["header"]["frame_id"] == HAND
     assert "contact: joint(s)" in node.log()
+    estimates = received["/neforward/joint_estimates"]  # the joint states used, and each q-ddot's deviation
+    assert len(estimates) == 360 and estimates[0]["joint_names"] == names
+    assert [stamp_ns(m) for m in estimates] == [stamp_ns(m) for m in torques]
+    points = [m["points"][0] for m in estimates]
+    accelerations = np.array([p["accelerations"] for p in points])
+    assert np.abs(accelerations - qdd[k]).max() <= 0.05 * np.abs(qdd[k]).max()
+    spread = np.array([p["effort"] for p in points])
+    assert spread.shape == accelerations.shape and np.all(spread > 0)
 
 
 def test_supplied_states_are_used_exactly(graph, tmp_path) -> None:
