@@ -37,9 +37,11 @@ The node (one target at a time, :func:`adaptive_fit`) and the bag tool (every ta
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 
+from neforward_ros.estimation import native_fit
 from neforward_ros.estimation.fit import block_fits, polynomial_fits
 
 GAMMA = 4.0
@@ -48,6 +50,9 @@ RATIO = math.sqrt(2.0)
 """Between consecutive half-widths of the ladder."""
 LEVELS = 10
 """Half-widths tried at most."""
+FLOOR = 1e-9
+"""The least noise, relative to the position: a still joint's samples, all alike, give fits that differ
+only by rounding, which must not break the intervals."""
 BLOCK = 2048
 """Targets fitted together by :func:`adaptive_fits`."""
 ROUGHNESS = 0.01
@@ -58,6 +63,14 @@ _SIXTH = math.sqrt(2.0 / math.pi) * math.sqrt(924.0)  # mean |N(0, 1)| times the
 def ladder(h_max: float) -> np.ndarray:
     """The half-widths tried, largest first."""
     return h_max / RATIO ** np.arange(LEVELS)
+
+
+@lru_cache(maxsize=64)
+def _ladder_and_leads(h_max: float, lead: float) -> tuple[np.ndarray, np.ndarray]:
+    """The half-widths (largest first) and each one's reach past the target, as the C function
+    takes them."""
+    half_widths = np.ascontiguousarray(ladder(float(h_max)))
+    return half_widths, np.ascontiguousarray(np.minimum(float(lead), half_widths))
 
 
 def noise_of(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -92,14 +105,21 @@ def select(
 
 
 def accel_std(
-    variance: np.ndarray, white: np.ndarray, step: np.ndarray, count: np.ndarray, travel: np.ndarray
+    variance: np.ndarray,
+    white: np.ndarray,
+    step: np.ndarray,
+    count: np.ndarray,
+    travel: np.ndarray,
+    position: np.ndarray,
 ) -> np.ndarray:
     """The standard deviation of q'' from a fit: ``variance`` its factor for unit white noise,
-    ``count`` samples in the window, ``travel`` the distance the joint moved across it."""
+    ``count`` samples in the window, ``travel`` the distance the joint moved across it, ``position``
+    the joint's position (the noise is at least :data:`FLOOR` of it: samples without any noise are
+    still rounded, and the fits with them)."""
     quantisation = step**2 / 12.0
     crossings = np.where(step > 0.0, travel / np.where(step > 0.0, step, 1.0), count)
     independent = np.minimum(np.maximum(crossings, 1.0), np.maximum(count, 1.0))
-    effective = np.maximum(white**2, quantisation * count / independent)
+    effective = np.maximum(np.maximum(white**2, quantisation * count / independent), (FLOOR * position) ** 2)
     return np.sqrt(np.maximum(variance, 0.0) * effective)
 
 
@@ -141,6 +161,26 @@ def adaptive_fits(
         order: polynomial degree.
         lead: the largest reach past the target, s (h_max for a centred fit, 0 for a causal one).
     """
+    library = native_fit.FIT.get(wait=len(targets) >= native_fit.WORTH_WAITING)
+    columns = np.full(y.shape[1], derivative)
+    got = None if library is None else native_fit.fits(library, t, y, targets, *_ladder_and_leads(h_max, lead), order,
+                                                       columns, GAMMA, ROUGHNESS, _SIXTH, FLOOR)  # fmt: skip
+    if got is None:
+        return python_adaptive_fits(t, y, targets, h_max, order, lead, derivative)
+    out, done = got
+    estimates = [np.ascontiguousarray(out[:, k]) for k in range(4)]
+    if not done.all():  # too few samples in a target's largest window: numpy's fits serve there
+        rest = np.flatnonzero(~done)
+        numpy_fits = python_adaptive_fits(t, y, targets[rest], h_max, order, lead, derivative)
+        for whole, part in zip(estimates, numpy_fits, strict=True):
+            whole[rest] = part
+    return estimates[0], estimates[1], estimates[2], estimates[3]
+
+
+def python_adaptive_fits(
+    t: np.ndarray, y: np.ndarray, targets: np.ndarray, h_max: float, order: int, lead: float, derivative: int = 2
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`adaptive_fits` in numpy."""
     levels = ladder(h_max)
     first_lead = _lead(levels[0], lead)
     lo = np.searchsorted(t, targets + first_lead - 2.0 * levels[0], side="left")
@@ -184,7 +224,7 @@ def _block_fits(
     speed = np.abs(fits[0][1])
     estimates = np.stack([f[derivative] for f in fits])
     stds = np.stack([
-        accel_std(f[2 + derivative][:, None], white, step, f[5][:, None], speed * 2.0 * h)
+        accel_std(f[2 + derivative][:, None], white, step, f[5][:, None], speed * 2.0 * h, fits[0][0])
         for f, h in zip(fits, used, strict=True)
     ])  # fmt: skip
     chosen, _ = select(estimates, stds, np.broadcast_to(valid, estimates.shape))
@@ -209,7 +249,29 @@ def adaptive_fit(
     usable window was chosen (the motion changes as fast as the samples can show), or the samples
     vary beyond a smooth motion by more than :data:`ROUGHNESS` of their spread in the window (noise,
     or a motion too fast for the rate: the two look alike to differences). Every level's fit in one
-    vectorised pass, with the arithmetic of :func:`neforward_ros.estimation.fit.polynomial_fits`."""
+    vectorised pass, with the arithmetic of :func:`neforward_ros.estimation.fit.polynomial_fits`; or,
+    once compiled, the same in one C call (:mod:`neforward_ros.estimation.native_fit`)."""
+    library = native_fit.FIT.get()
+    if library is not None:
+        got = native_fit.fit(
+            library, times, values, target, *_ladder_and_leads(h_max, lead), order, derivative, GAMMA, ROUGHNESS,
+            _SIXTH, FLOOR,
+        )  # fmt: skip
+        if got is not None:
+            return got
+    return python_adaptive_fit(times, values, target, h_max, order, lead, derivative)
+
+
+def python_adaptive_fit(
+    times: np.ndarray,
+    values: np.ndarray,
+    target: float,
+    h_max: float,
+    order: int,
+    lead: float,
+    derivative: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`adaptive_fit` in numpy."""
     levels = ladder(h_max)
     leads = np.minimum(lead, levels)
     lo = times.searchsorted(target + leads - 2.0 * levels, side="left")
@@ -230,7 +292,7 @@ def adaptive_fit(
     estimates = np.where(second, d2, d1)
     variance = np.where(second, var2[:, None], var1[:, None])
     speed = np.abs(d1[0])
-    stds = accel_std(variance, white, step, counts[:, None], speed * 2.0 * levels[:, None])
+    stds = accel_std(variance, white, step, counts[:, None], speed * 2.0 * levels[:, None], value[0])
     chosen, _ = select(estimates, stds, np.broadcast_to(valid[:, None], estimates.shape))
     columns = np.arange(values.shape[1])
     smallest = max(int(np.count_nonzero(valid)) - 1, 0)  # the windows are nested: valid ones come first

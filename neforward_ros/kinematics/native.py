@@ -225,7 +225,7 @@ class NativeKernel:
         try:
             if cc is None:
                 raise OSError("no C compiler")
-            library = _compile(cc, source, [*flags, *COMMON])
+            library = compile_library(cc, source, [*flags, *COMMON])
             try:
                 function = NativeFunction(getattr(ctypes.CDLL(str(library)), self._name), inputs, outputs)
                 if path is not None:
@@ -247,7 +247,13 @@ _BUILDS: set[subprocess.Popen] = set()
 """Compilers running now: stopped when the process exits (a thread's build is not waited for)."""
 
 
-def _compile(cc: str, source: str, flags: list[str]) -> Path:
+def compile_library(cc: str, source: str, flags: list[str]) -> Path:
+    """Compile C ``source`` into a shared library in a fresh temporary folder (the caller moves it
+    and removes the folder); stopped with the process.
+
+    Raises:
+        OSError, subprocess.SubprocessError: the compiler did not run or failed.
+    """
     folder = Path(tempfile.mkdtemp(prefix="neforward-kernel-"))
     c_file, library = folder / "kernel.c", folder / "kernel.so"
     c_file.write_text(source)

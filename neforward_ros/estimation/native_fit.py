@@ -1,0 +1,379 @@
+"""The node's adaptive polynomial fit (:func:`neforward_ros.estimation.adaptive.adaptive_fit`) as
+machine code: the same windows, noise, fits and ICI rule, written in C and compiled once per machine.
+
+The Python function makes some sixty numpy calls per estimate, each a few microseconds however small
+its arrays: about 0.2 ms a message, which at 2 kHz is most of the node's budget. Here one C call
+does the same. Its arithmetic differs from numpy's only in the order of additions: the windows are
+nested, so each sample's powers are added once, ring by ring from the smallest window outwards (in
+the largest window's unit, rescaled per level: inner sums never come from differences of larger
+ones), where the Python function fits each level on its own; and the normal equations are inverted
+by a Cholesky factorisation where numpy calls LAPACK. The two agree to rounding (tested, with the
+same window chosen).
+
+Compiled with the system's C compiler (``cc``, ``$CC``) on first use, in a thread, and kept in the
+disk cache (:mod:`neforward_ros.disk_cache`, ``kernels/``); until it is ready, and where there is no
+compiler or ``NEFORWARD_NATIVE=off``, the Python function serves.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from neforward_ros import disk_cache
+from neforward_ros.kinematics import native
+
+WORTH_WAITING = 5000
+"""Targets from which a batch waits for the build rather than fitting in numpy meanwhile."""
+MAX_ORDER = 15
+"""The highest polynomial degree the C function takes (the Python function serves above it)."""
+FLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
+
+SOURCE = r"""
+#include <math.h>
+#include <stdlib.h>
+
+static long lower_bound(const double *t, long count, double x) {  /* first index with t >= x */
+    long lo = 0, hi = count;
+    while (lo < hi) { long mid = (lo + hi) / 2; if (t[mid] < x) lo = mid + 1; else hi = mid; }
+    return lo;
+}
+
+static long upper_bound(const double *t, long count, double x) {  /* first index with t > x */
+    long lo = 0, hi = count;
+    while (lo < hi) { long mid = (lo + hi) / 2; if (t[mid] <= x) lo = mid + 1; else hi = mid; }
+    return lo;
+}
+
+/* numpy's maximum and minimum: NaN if either is */
+static double nmax(double a, double b) { return isnan(a) || isnan(b) ? NAN : (a > b ? a : b); }
+static double nmin(double a, double b) { return isnan(a) || isnan(b) ? NAN : (a < b ? a : b); }
+
+/* Inverse of the symmetric positive definite d x d matrix a (row-major) into inv; 0 if a is not
+   positive definite to rounding. */
+static int spd_inverse(const double *a, long d, double *inv) {
+    double low[16 * 16], x[16 * 16];
+    for (long i = 0; i < d * d; i++) { low[i] = 0.0; x[i] = 0.0; }
+    for (long j = 0; j < d; j++) {
+        double pivot = a[j * d + j];
+        for (long k = 0; k < j; k++) pivot -= low[j * d + k] * low[j * d + k];
+        if (!(pivot > 0.0)) return 0;
+        low[j * d + j] = sqrt(pivot);
+        for (long i = j + 1; i < d; i++) {
+            double s = a[i * d + j];
+            for (long k = 0; k < j; k++) s -= low[i * d + k] * low[j * d + k];
+            low[i * d + j] = s / low[j * d + j];
+        }
+    }
+    for (long i = 0; i < d; i++) {  /* x = low^-1, lower triangular */
+        x[i * d + i] = 1.0 / low[i * d + i];
+        for (long j = 0; j < i; j++) {
+            double s = 0.0;
+            for (long k = j; k < i; k++) s += low[i * d + k] * x[k * d + j];
+            x[i * d + j] = -s * x[i * d + i];
+        }
+    }
+    for (long i = 0; i < d; i++)
+        for (long j = 0; j <= i; j++) {
+            double s = 0.0;
+            for (long k = i; k < d; k++) s += x[k * d + i] * x[k * d + j];
+            inv[i * d + j] = s;
+            inv[j * d + i] = s;
+        }
+    return 1;
+}
+
+/* See adaptive_fit in neforward_ros/estimation/adaptive.py. times (count,), values (count, n)
+   row-major; levels, leads (nlevels,) the half-widths (largest first) and their leads; derivative
+   (n,) 2 or 1. out (5, n): value, first and second derivative, the chosen derivative's standard
+   deviation, strained (1 or 0). Returns 0 when done, 1 when the largest window is too small (the
+   caller's function serves), 2 when memory runs out. */
+int adaptive_fit(long count, const double *times, const double *values, long n, double target,
+                 long nlevels, const double *levels, const double *leads, long order,
+                 const long *derivative, double gamma, double roughness, double sixth_gain,
+                 double floor_, double *out) {
+    long d = order + 1, lo[64], hi[64], valid = 0;
+    if (nlevels > 64 || d > 16 || n < 1) return 1;
+    for (long l = 0; l < nlevels; l++) {
+        lo[l] = lower_bound(times, count, (target + leads[l]) - 2.0 * levels[l]);
+        hi[l] = upper_bound(times, count, target + leads[l]);
+        if (hi[l] - lo[l] >= order + 3 && valid == l) valid = l + 1;
+    }
+    if (valid == 0) return 1;
+    long width = hi[0] - lo[0];
+    double *scratch = malloc(sizeof(double) * ((size_t)width * n + d * n + 5 * (size_t)valid * n + 3 * n));
+    if (scratch == NULL) return 2;
+    double *diffs = scratch, *moments = diffs + (size_t)width * n, *fits = moments + d * n;
+    double *white = fits + 5 * (size_t)valid * n, *step = white + n, *spread = step + n;
+    /* the noise, from the largest window, every column at once (rows are contiguous): the samples'
+       deviation, the mean |sixth difference|, the smallest non-zero step */
+    const double *window = values + lo[0] * n;
+    for (long j = 0; j < n; j++) { white[j] = 0.0; spread[j] = 0.0; step[j] = INFINITY; }
+    for (long i = 0; i < width; i++) for (long j = 0; j < n; j++) white[j] += window[i * n + j];
+    for (long j = 0; j < n; j++) white[j] *= 1.0 / width;  /* the mean, for now */
+    for (long i = 0; i < width; i++)
+        for (long j = 0; j < n; j++) { double c = window[i * n + j] - white[j]; spread[j] += c * c; }
+    for (long j = 0; j < n; j++) { spread[j] = sqrt(spread[j] * (1.0 / width)); white[j] = 0.0; }
+    if (width >= 8) {
+        for (long i = 0; i + 1 < width; i++)
+            for (long j = 0; j < n; j++) {
+                double difference = window[(i + 1) * n + j] - window[i * n + j], a = fabs(difference);
+                diffs[i * n + j] = difference;
+                if (a != 0.0 && a < step[j]) step[j] = a;
+            }
+        for (long pass = 1; pass < 6; pass++)
+            for (long i = 0; i + 1 < width - pass; i++)
+                for (long j = 0; j < n; j++) diffs[i * n + j] = diffs[(i + 1) * n + j] - diffs[i * n + j];
+        for (long i = 0; i < width - 6; i++) for (long j = 0; j < n; j++) white[j] += fabs(diffs[i * n + j]);
+        for (long j = 0; j < n; j++) white[j] *= 1.0 / ((double)(width - 6) * sixth_gain);
+    }
+    for (long j = 0; j < n; j++) if (isinf(step[j]) || width < 8) step[j] = 0.0;
+    /* every valid level's fit, the sums gathered ring by ring from the smallest window outwards */
+    double sums[33], gram[16 * 16], inv[16 * 16], h0 = levels[0];
+    for (long k = 0; k <= 2 * order; k++) sums[k] = 0.0;
+    for (long k = 0; k < d * n; k++) moments[k] = 0.0;
+    long inner_lo = 0, inner_hi = 0;
+    int status = 0;
+    for (long l = valid - 1; l >= 0; l--) {
+        long ring[2][2] = {{lo[l], l == valid - 1 ? hi[l] : inner_lo}, {l == valid - 1 ? hi[l] : inner_hi, hi[l]}};
+        for (long side = 0; side < 2; side++)
+            for (long i = ring[side][0]; i < ring[side][1]; i++) {
+                double u = (times[i] - target) / h0, p = 1.0;
+                const double *row = values + i * n;
+                for (long k = 0; k <= 2 * order; k++) {
+                    sums[k] += p;
+                    if (k < d) for (long j = 0; j < n; j++) moments[k * n + j] += p * row[j];
+                    p *= u;
+                }
+            }
+        inner_lo = lo[l]; inner_hi = hi[l];
+        double h = levels[l], r = h0 / h, scale[33];
+        scale[0] = 1.0;
+        for (long k = 1; k <= 2 * order; k++) scale[k] = scale[k - 1] * r;
+        for (long a = 0; a < d; a++)
+            for (long b = 0; b < d; b++) gram[a * d + b] = sums[a + b] * scale[a + b];
+        if (!spd_inverse(gram, d, inv)) { status = 1; break; }
+        for (long j = 0; j < n; j++) {
+            double c[3] = {0.0, 0.0, 0.0};
+            for (long q = 0; q < 3; q++)
+                for (long k = 0; k < d; k++) c[q] += inv[q * d + k] * (moments[k * n + j] * scale[k]);
+            double *fit = fits + (l * n + j) * 5;
+            fit[0] = c[0];
+            fit[1] = c[1] / h;
+            fit[2] = 2.0 * c[2] / (h * h);
+            int second = derivative[j] == 2;
+            double variance = second ? 4.0 * inv[2 * d + 2] / (h * h * h * h) : inv[1 * d + 1] / (h * h);
+            fit[3] = variance;  /* its standard deviation once the speed is known */
+        }
+    }
+    if (status == 0) {
+        for (long j = 0; j < n; j++) {
+            double speed = fabs(fits[j * 5 + 1]);  /* level 0's first derivative */
+            double low_run = -INFINITY, high_run = INFINITY;
+            long chosen = -1;
+            int meets[64];
+            for (long l = valid - 1; l >= 0; l--) {
+                double *fit = fits + (l * n + j) * 5, cnt = (double)(hi[l] - lo[l]);
+                double quantisation = step[j] * step[j] / 12.0, travel = speed * 2.0 * levels[l];
+                double crossings = step[j] > 0.0 ? travel / step[j] : cnt;
+                double independent = nmin(nmax(crossings, 1.0), nmax(cnt, 1.0));
+                double least = floor_ * fits[j * 5];  /* level 0's value */
+                double effective = nmax(nmax(white[j] * white[j], quantisation * cnt / independent), least * least);
+                double std = sqrt(nmax(fit[3], 0.0) * effective);
+                fit[3] = std;
+                double estimate = derivative[j] == 2 ? fit[2] : fit[1];
+                double low = estimate - gamma * std, high = estimate + gamma * std;
+                low_run = nmax(low_run, low);
+                high_run = nmin(high_run, high);
+                meets[l] = low_run <= high_run;
+            }
+            for (long l = 0; l < valid && chosen < 0; l++) if (meets[l]) chosen = l;
+            if (chosen < 0) chosen = 0;
+            double *fit = fits + (chosen * n + j) * 5;
+            long smallest_level = valid - 1;
+            int strained = (chosen == smallest_level && smallest_level > 0) || white[j] > roughness * spread[j];
+            out[j] = fit[0];
+            out[n + j] = fit[1];
+            out[2 * n + j] = fit[2];
+            out[3 * n + j] = fit[3];
+            out[4 * n + j] = strained ? 1.0 : 0.0;
+        }
+    }
+    free(scratch);
+    return status;
+}
+
+/* adaptive_fit at each of ntargets targets over the whole of times, values; derivative (n,); out
+   (ntargets, 5, n); status (ntargets,) each target's return value. */
+void adaptive_fits(long count, const double *times, const double *values, long n, long ntargets,
+                   const double *targets, long nlevels, const double *levels, const double *leads,
+                   long order, const long *derivative, double gamma, double roughness,
+                   double sixth_gain, double floor_, double *out, int *status) {
+    for (long m = 0; m < ntargets; m++)
+        status[m] = adaptive_fit(count, times, values, n, targets[m], nlevels, levels, leads, order,
+                                 derivative, gamma, roughness, sixth_gain, floor_, out + m * 5 * n);
+}
+"""
+
+
+class NativeAdaptiveFit:
+    """The compiled library, built on first use in a thread (see the module docstring); ``get``
+    gives it once ready, else None."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._library: ctypes.CDLL | None = None
+        self._started = False
+        self._thread: threading.Thread | None = None
+
+    def get(self, wait: bool = False) -> ctypes.CDLL | None:
+        """The library if it is ready; with ``wait``, built now if it is not (a whole recording's
+        estimates are worth the build's fraction of a second)."""
+        if self._library is not None or (self._started and not wait):
+            return self._library
+        with self._lock:
+            if not self._started:
+                self._started = True
+                if not self._load():
+                    self._thread = threading.Thread(target=self._build, name="neforward-compile-fit", daemon=True)
+                    self._thread.start()
+            thread = self._thread
+        if wait and thread is not None:
+            thread.join()
+        return self._library
+
+    def _path(self, cc: str) -> Path | None:
+        folder = disk_cache.directory()
+        if folder is None:
+            return None
+        digest = hashlib.sha256("\n".join([SOURCE, cc, *FLAGS, sys.platform]).encode()).hexdigest()
+        return folder / "kernels" / f"adaptive_fit-{digest[:32]}.so"
+
+    def _load(self) -> bool:
+        cc = native.compiler()
+        if cc is None:
+            return True  # nothing to build: the Python function serves
+        path = self._path(cc)
+        if path is None or not path.exists():
+            return False
+        try:
+            self._library = _declare(ctypes.CDLL(str(path)))
+        except (OSError, AttributeError):
+            path.unlink(missing_ok=True)
+            return False
+        return True
+
+    def _build(self) -> None:
+        cc = native.compiler()
+        if cc is None:
+            return
+        try:
+            library = native.compile_library(cc, SOURCE, list(FLAGS))
+        except (OSError, subprocess.SubprocessError, ValueError):
+            return
+        try:
+            function = _declare(ctypes.CDLL(str(library)))
+            path = self._path(cc)
+            if path is not None:
+                try:
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    os.replace(library, path)
+                except OSError:
+                    pass
+        except (OSError, AttributeError):
+            return
+        finally:
+            shutil.rmtree(library.parent, ignore_errors=True)
+        self._library = function
+
+
+def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
+    double, pointer, long = ctypes.c_double, ctypes.c_void_p, ctypes.c_long
+    library.adaptive_fit.argtypes = [long, pointer, pointer, long, double, long, pointer, pointer, long, pointer,
+                                     double, double, double, double, pointer]  # fmt: skip
+    library.adaptive_fit.restype = ctypes.c_int
+    library.adaptive_fits.argtypes = [long, pointer, pointer, long, long, pointer, long, pointer, pointer, long,
+                                      pointer, double, double, double, double, pointer, pointer]  # fmt: skip
+    library.adaptive_fits.restype = None
+    return library
+
+
+FIT = NativeAdaptiveFit()
+"""The one compiled function of this process."""
+
+
+def fit(
+    library: ctypes.CDLL,
+    times: np.ndarray,
+    values: np.ndarray,
+    target: float,
+    half_widths: np.ndarray,
+    leads: np.ndarray,
+    order: int,
+    derivative: np.ndarray,
+    gamma: float,
+    roughness: float,
+    sixth_gain: float,
+    floor: float,
+) -> tuple[np.ndarray, ...] | None:
+    """The C function's value, first and second derivative, standard deviation and strain (n,) each;
+    None where the Python function must serve (too few samples, an order above MAX_ORDER)."""
+    if order > MAX_ORDER:
+        return None
+    times = np.ascontiguousarray(times, dtype=float)
+    values = np.ascontiguousarray(values, dtype=float)
+    derivative = _longs(derivative)
+    n = values.shape[1]
+    out = np.empty((5, n))
+    status = library.adaptive_fit(len(times), times.ctypes.data, values.ctypes.data, n, float(target),
+                                  len(half_widths), half_widths.ctypes.data, leads.ctypes.data, order,
+                                  derivative.ctypes.data, gamma, roughness, sixth_gain, floor,
+                                  out.ctypes.data)  # fmt: skip
+    if status != 0:
+        return None
+    return out[0], out[1], out[2], out[3], out[4] > 0.5
+
+
+def fits(
+    library: ctypes.CDLL,
+    times: np.ndarray,
+    values: np.ndarray,
+    targets: np.ndarray,
+    half_widths: np.ndarray,
+    leads: np.ndarray,
+    order: int,
+    derivative: np.ndarray,
+    gamma: float,
+    roughness: float,
+    sixth_gain: float,
+    floor: float,
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """:func:`fit` at every target over the whole of ``times, values``: (M, 5, n) and whether each
+    target was done (M,) (where not, the Python function must serve); None above MAX_ORDER."""
+    if order > MAX_ORDER:
+        return None
+    times = np.ascontiguousarray(times, dtype=float)
+    values = np.ascontiguousarray(values, dtype=float)
+    targets = np.ascontiguousarray(targets, dtype=float)
+    n = values.shape[1]
+    out = np.empty((len(targets), 5, n))
+    status = np.empty(len(targets), dtype=np.intc)
+    library.adaptive_fits(len(times), times.ctypes.data, values.ctypes.data, n, len(targets), targets.ctypes.data,
+                          len(half_widths), half_widths.ctypes.data, leads.ctypes.data, order,
+                          _longs(derivative).ctypes.data, gamma, roughness, sixth_gain, floor, out.ctypes.data,
+                          status.ctypes.data)  # fmt: skip
+    return out, status == 0
+
+
+def _longs(values: np.ndarray) -> np.ndarray:
+    """As C longs, contiguous."""
+    kind = np.int64 if ctypes.sizeof(ctypes.c_long) == 8 else np.int32
+    return np.ascontiguousarray(values, dtype=kind)

@@ -1,0 +1,105 @@
+"""The adaptive fit in C (neforward_ros.estimation.native_fit) against the numpy one it replaces.
+
+On a family of windows the two must agree: rates 100 Hz to 2 kHz with jitter, degrees 2 to 5,
+centred, lagged and causal windows, smooth, noisy and quantised joints, still joints, one to eleven
+columns, either derivative: the same window chosen (the same strain flags), estimates within
+rounding. The node (one window at a time) and the bag tool (every target of a recording) take the
+very same numbers from it. Without a compiler, or with NEFORWARD_NATIVE=off, numpy serves.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from neforward_ros.estimation import adaptive, native_fit
+from neforward_ros.kinematics import native
+
+pytestmark = pytest.mark.skipif(native.compiler() is None, reason="no C compiler (cc) here: numpy serves")
+
+
+def library():
+    found = native_fit.FIT.get(wait=True)
+    assert found is not None, "the C adaptive fit did not build"
+    return found
+
+
+def window(rng: np.random.Generator):
+    rate = float(rng.choice([100.0, 250.0, 500.0, 1000.0, 2000.0]))
+    n = int(rng.integers(1, 12))
+    order = int(rng.choice([2, 3, 4, 5]))
+    h = 0.1
+    lead = float(rng.choice([h, 0.0, 0.03, 0.07]))
+    count = int(2 * h * rate) + 1
+    t = np.sort(np.arange(count) / rate + rng.uniform(-0.05, 0.05, count) / rate) + 3.0
+    target = t[-1] - lead
+    y = np.sin(2 * np.pi * t[:, None] * rng.uniform(0.1, 8.0, n) + rng.uniform(0, 6, n)) * rng.uniform(0.01, 1, n)
+    kind = int(rng.integers(3))
+    if kind == 1:
+        y = y + rng.normal(0.0, 1e-3, y.shape)
+    elif kind == 2:
+        step = 2 * np.pi / 2 ** int(rng.integers(10, 20))
+        y = np.round(y / step) * step
+    still = bool(rng.random() < 0.15)
+    if still:
+        y[:, 0] = 0.3
+    derivative = rng.choice([1, 2], n)
+    return t, y, target, h, order, lead, derivative, still
+
+
+def test_c_and_numpy_choose_the_same_windows_and_agree_to_rounding() -> None:
+    lib = library()
+    rng = np.random.default_rng(2026)
+    worst = 0.0
+    for _ in range(1500):
+        t, y, target, h, order, lead, derivative, still = window(rng)
+        want = adaptive.python_adaptive_fit(t, y, target, h, order, lead, derivative)
+        got = native_fit.fit(lib, t, y, target, *adaptive._ladder_and_leads(h, lead), order, derivative,
+                             adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._SIXTH, adaptive.FLOOR)  # fmt: skip
+        assert got is not None
+        np.testing.assert_array_equal(got[4], want[4])  # strained: the same windows chosen
+        moving = slice(1, None) if still else slice(None)
+        for k in (0, 1, 2):
+            # the estimate, its spread, and the rounding of the samples through the fit (a joint whose
+            # samples are all alike has estimates of rounding only)
+            scale = np.abs(want[k]) + want[3] * h ** (2 - k) + 1e-5 * np.abs(y).max(axis=0) / h**k
+            error = np.abs(got[k] - want[k])[moving] / scale[moving]
+            # rounding, through the conditioning of each degree's normal equations (a causal window of
+            # degree 5 is the worst: 1e-7)
+            bound = 1e-7 if lead < 0.05 and order == 5 else 1e-8
+            assert np.all(error <= bound), (k, order, lead, error.max())
+            worst = max(worst, float(error.max(initial=0.0)))
+        np.testing.assert_allclose(got[3], want[3], rtol=1e-6)
+        if still:  # a still joint: rounding only, within its stated floor
+            assert abs(got[2][0]) <= 1e-6 and abs(want[2][0]) <= 1e-6
+    assert worst > 0.0  # two computations, not one
+
+
+def test_the_node_and_the_bag_take_the_very_same_numbers() -> None:
+    """One target on its window's samples (the node) and every target on the whole recording (the
+    bag tool): bitwise the same."""
+    library()
+    rng = np.random.default_rng(5)
+    count, n = 6000, 5
+    t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
+    y = np.sin(t[:, None] * np.arange(1, n + 1)) + rng.normal(0.0, 1e-4, (count, n))
+    whole = adaptive.adaptive_fits(t, y, t, 0.1, 4, 0.1)
+    for i in range(60, count - 60, 37):
+        lo, hi = np.searchsorted(t, t[i] - 0.1), np.searchsorted(t, t[i] + 0.1, side="right")
+        one = adaptive.adaptive_fit(t[lo:hi], y[lo:hi], t[i], 0.1, 4, 0.1, np.full(n, 2))
+        for k in range(4):
+            np.testing.assert_array_equal(one[k], whole[k][i])
+
+
+def test_targets_with_too_few_samples_take_numpy_and_no_compiler_takes_numpy_everywhere(monkeypatch) -> None:
+    library()
+    rng = np.random.default_rng(6)
+    t = np.arange(400) / 500.0
+    y = np.sin(3 * t[:, None]) + rng.normal(0.0, 1e-4, (400, 2))
+    targets = np.array([-0.5, -0.095, 0.3, 0.5])  # the first two: too few samples for any window
+    got = adaptive.adaptive_fits(t, y, targets, 0.1, 4, 0.1)
+    np.testing.assert_array_equal(got[2][:2], adaptive.python_adaptive_fits(t, y, targets[:2], 0.1, 4, 0.1)[2])
+    np.testing.assert_allclose(got[2][2:], adaptive.python_adaptive_fits(t, y, targets, 0.1, 4, 0.1)[2][2:], rtol=1e-8)
+    monkeypatch.setenv("NEFORWARD_NATIVE", "off")
+    fresh = native_fit.NativeAdaptiveFit()
+    assert fresh.get(wait=True) is None
