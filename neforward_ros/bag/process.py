@@ -22,6 +22,7 @@ from neforward_ros.bag.write import RecordingWriter
 from neforward_ros.computation.compute import ComputeState, observer_wanted
 from neforward_ros.computation.result import Observation, Result
 from neforward_ros.errors import InputError
+from neforward_ros.estimation import native_fit
 from neforward_ros.kinematics.backward_kernel import backward_of
 from neforward_ros.kinematics.forward_kernel import kernel_of
 from neforward_ros.kinematics.joint_space_kernel import momentum_of
@@ -67,6 +68,8 @@ def process_bag(
             import matplotlib  # noqa: F401
         except ImportError as exc:
             raise InputError("--plot needs matplotlib: pip install 'neforward_ros[plot]' (or matplotlib)") from exc
+    if settings.estimator.method == "polyfit" and settings.estimator.adaptive:
+        native_fit.FIT.get()  # the adaptive fit's C, compiled in a thread while the recording is read
     recording = read(source, options, progress)
     model = recording.model
     # Compile the recursions in a thread while the recording is estimated (a model seen before: the

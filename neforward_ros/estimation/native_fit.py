@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
-import os
 import shutil
 import subprocess
 import sys
@@ -35,7 +34,7 @@ WORTH_WAITING = 5000
 """Targets from which a batch waits for the build rather than fitting in numpy meanwhile."""
 MAX_ORDER = 15
 """The highest polynomial degree the C function takes (the Python function serves above it)."""
-FLAGS = ("-O2", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
+FLAGS = ("-O1", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
 
 SOURCE = r"""
 #include <math.h>
@@ -283,11 +282,7 @@ class NativeAdaptiveFit:
             function = _declare(ctypes.CDLL(str(library)))
             path = self._path(cc)
             if path is not None:
-                try:
-                    path.parent.mkdir(parents=True, exist_ok=True)
-                    os.replace(library, path)
-                except OSError:
-                    pass
+                native.keep(library, path)
         except (OSError, AttributeError):
             return
         finally:

@@ -229,11 +229,7 @@ class NativeKernel:
             try:
                 function = NativeFunction(getattr(ctypes.CDLL(str(library)), self._name), inputs, outputs)
                 if path is not None:
-                    try:
-                        path.parent.mkdir(parents=True, exist_ok=True)
-                        os.replace(library, path)  # loaded already: the name may change under it
-                    except OSError:
-                        pass  # no cache: built again in another process
+                    keep(library, path)
             finally:
                 shutil.rmtree(library.parent, ignore_errors=True)
             return function
@@ -245,6 +241,19 @@ class NativeKernel:
 
 _BUILDS: set[subprocess.Popen] = set()
 """Compilers running now: stopped when the process exits (a thread's build is not waited for)."""
+
+
+def keep(library: Path, path: Path) -> None:
+    """Put a built library in the disk cache at ``path``: copied beside it, then renamed into place
+    (the cache is often on another file system than the temporary folder, where a rename fails; a
+    reader never sees half a file). No cache (unwritable): built again in another process."""
+    staging = path.with_name(f"{path.name}.{os.getpid()}.{threading.get_ident()}.part")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(library, staging)
+        os.replace(staging, path)
+    except OSError:
+        staging.unlink(missing_ok=True)
 
 
 def compile_library(cc: str, source: str, flags: list[str]) -> Path:
