@@ -220,6 +220,9 @@ def main() -> None:
     parser.add_argument("--modes", default="fixed_lag,causal")
     parser.add_argument("--inputs", default="positions,velocities")
     parser.add_argument("--robots", default="arm,humanoid")
+    parser.add_argument(
+        "-p", dest="parameters", action="append", default=[], metavar="NAME:=VALUE", help="more node parameters"
+    )
     parser.add_argument("--echo-server", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.echo_server:
@@ -252,7 +255,8 @@ def main() -> None:
                             topic, typename = "rt/echo", topics.JOINT_STATE_TYPE
                         else:
                             command = [sys.executable, "-m", "neforward_ros", "run", "--urdf", str(path)]
-                            process = start([*command, "--ros-args", "-p", f"estimator.mode:={mode}"])
+                            extra = [token for rule in args.parameters for token in ("-p", rule)]
+                            process = start([*command, "--ros-args", "-p", f"estimator.mode:={mode}", *extra])
                             topic, typename = "rt/neforward/link_states", topics.LINK_STATES_TYPE
                         try:
                             stamps, received = measure(

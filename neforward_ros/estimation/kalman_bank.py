@@ -86,7 +86,7 @@ class KalmanBank:
 
     def add(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> None:
         """One sample of every joint (see :meth:`KalmanTrack.add`)."""
-        usual = float(np.median(self._intervals)) if len(self._intervals) >= 4 else None
+        usual = _median(self._intervals) if len(self._intervals) >= 4 else None
         silence = self._last is not None and usual is not None and (stamp - self._last) / NS > 3.0 * usual
         if silence:
             # A silence: differences across it are motion, not noise. Read the noise afresh after it,
@@ -194,6 +194,13 @@ class KalmanBank:
             noise = self._noise("velocities", self._velocities, FALLBACK_VELOCITY_NOISE)
             for track in self.tracks:
                 track._velocity_noise = noise
+
+
+def _median(values: deque[float]) -> float:
+    """The median of a few numbers, without numpy's overhead."""
+    ordered = sorted(values)
+    middle = len(ordered) // 2
+    return ordered[middle] if len(ordered) % 2 else 0.5 * (ordered[middle - 1] + ordered[middle])
 
 
 def _concrete(settings: KalmanSettings, length_scale: float) -> KalmanSettings:

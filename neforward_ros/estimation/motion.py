@@ -129,7 +129,19 @@ class MotionModel:
         self.prior[3:, 3:] = self._stationary
 
     def transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """(F, Q) over dt seconds: x(t + dt) = F x(t) + w, w ~ N(0, Q)."""
+        """(F, Q) over dt seconds: x(t + dt) = F x(t) + w, w ~ N(0, Q). Kept for the intervals seen
+        last (a steady rate has one or two): read-only arrays."""
+        cache = self.__dict__.setdefault("_transitions", {})
+        found = cache.get(dt)
+        if found is None:
+            if len(cache) >= 64:
+                cache.clear()
+            found = cache[dt] = self._transition(dt)
+            for array in found:
+                array.flags.writeable = False
+        return found
+
+    def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
         n = ORDER
         transition = np.zeros((self.dim, self.dim))
         noise = np.zeros((self.dim, self.dim))

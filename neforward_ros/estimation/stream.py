@@ -21,6 +21,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from neforward_ros.errors import InputError
+from neforward_ros.estimation import native_fit
 from neforward_ros.estimation.adaptive import adaptive_fit
 from neforward_ros.estimation.coverage import uncovered
 from neforward_ros.estimation.estimate import JointEstimate
@@ -110,6 +111,8 @@ class StreamingEstimator:
         self.accepted: list[tuple[int, list[Sample]] | str] = []
         """The messages the last :meth:`update` used, in order: (stamp, samples), and :data:`RESTART`
         where the stream restarted (the momentum observer's raw samples)."""
+        if self.settings.method == "polyfit" and self.settings.adaptive:
+            native_fit.FIT.get()  # the adaptive fit's C, compiled in a thread meanwhile (numpy serves until then)
 
     # -- input ------------------------------------------------------------------------------
 
@@ -442,19 +445,24 @@ class StreamingEstimator:
         length scale too long, the noise set too low); far below, it smooths less than it could.
         Said per joint, throttled, with the parameter that would fit."""
         track = group.track
-        if track is None or len(track.nis) != len(group.joints):
+        if track is None:
             return
+        nis = track.nis
+        if len(nis) != len(group.joints):
+            return
+        joints = np.asarray(group.joints)
         read = (track.read_noise.get("positions"), track.read_noise.get("velocities"))
         weights = np.log(np.maximum(track.weights(), 1e-12)) if track.scores is not None else None
-        for k, j in enumerate(group.joints):
+        for k, j in enumerate(group.joints):  # what a restart starts from
             self._noise_memory[j] = read
             if weights is not None:
                 self._score_memory[j] = weights[:, k]
-        joints = np.asarray(group.joints)
-        self._innovations[joints] = (1.0 - STRAIN_MEMORY) * self._innovations[joints] + STRAIN_MEMORY * track.nis
+        innovations = (1.0 - STRAIN_MEMORY) * self._innovations[joints] + STRAIN_MEMORY * nis
+        self._innovations[joints] = innovations
         self._watched[joints] += 1
         settings = self.settings.kalman
-        for j in joints[self._watched[joints] > 2 / STRAIN_MEMORY]:
+        off = (innovations > INNOVATION_LIMIT) | ((innovations < 1.0 / INNOVATION_LIMIT) & bool(settings.noise))
+        for j in joints[off & (self._watched[joints] > 2 / STRAIN_MEMORY)]:
             ratio = float(self._innovations[j])
             if ratio > INNOVATION_LIMIT:
                 scale = settings.length_scale or min(LENGTH_SCALES)
