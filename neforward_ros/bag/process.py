@@ -18,7 +18,7 @@ from neforward_ros.bag.options import BagOptions, check_options
 from neforward_ros.bag.plot import PlotSeries, write_plot
 from neforward_ros.bag.read import read
 from neforward_ros.bag.report import BagReport, Progress
-from neforward_ros.bag.write import RecordingWriter
+from neforward_ros.bag.write import RecordingWriter, staging_folder
 from neforward_ros.computation.compute import ComputeState, observer_wanted
 from neforward_ros.computation.result import Observation, Result
 from neforward_ros.errors import InputError
@@ -106,8 +106,9 @@ def process_bag(
     # Every output is written under a temporary name and all are moved into place together at the
     # end: an error or an interrupt leaves none of them, and nothing half-written.
     partials: list[Path] = []
-    recording_writer = RecordingWriter(output, options, model)
+    recording_writer: RecordingWriter | None = None
     try:
+        recording_writer = RecordingWriter(output, options, model)
         csv = None
         if csv_path is not None:
             partials.append(_partial(Path(csv_path)))
@@ -168,10 +169,14 @@ def process_bag(
             signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
         progress("finishing", 1.0)
     except BaseException:
-        recording_writer.discard()
+        if recording_writer is not None:
+            recording_writer.discard()
+        else:  # interrupted as the writer was made: its staging folder, if it came to be
+            shutil.rmtree(staging_folder(output), ignore_errors=True)
         for partial in partials:
             partial.unlink(missing_ok=True)
         raise
+    assert recording_writer is not None
     shutil.rmtree(recording_writer.staging, ignore_errors=True)
     report.topics = recording_writer.topics
     report.seconds = time.monotonic() - started

@@ -44,6 +44,11 @@ def output_topics(options: BagOptions) -> list[tuple[str, str]]:
     return [(names.resolve(o.topic), o.type) for o in outputs]
 
 
+def staging_folder(output: Path) -> Path:
+    """Where a recording is written before it is moved to ``output``: a hidden name of this process."""
+    return output.with_name(f".{output.name}.partial-{os.getpid()}")
+
+
 class RecordingWriter:
     """A rosbag2 recording written chunk by chunk, inside a staging folder until :meth:`finish`.
 
@@ -62,18 +67,24 @@ class RecordingWriter:
         settings = options.settings
         self.options = options
         self.names = NodeNames()
-        self.staging = output.with_name(f".{output.name}.partial-{os.getpid()}")
+        self.staging = staging_folder(output)
         if self.staging.exists():
             shutil.rmtree(self.staging)
         self.staging.mkdir()
         self.path = self.staging / output.name
         storage = StoragePlugin.MCAP if options.storage == "mcap" else StoragePlugin.SQLITE3
-        self.writer = Writer(self.path, version=9, storage_plugin=storage)
-        self.writer.open()
-        self.connections = {
-            topic: self.writer.add_connection(topic, kind, msgdef=facts(kind)["msgdef"], rihs01=facts(kind)["rihs01"])
-            for topic, kind in output_topics(options)
-        }
+        try:  # until the caller holds this writer, an error or a Ctrl-C here is this writer's to clean up
+            self.writer = Writer(self.path, version=9, storage_plugin=storage)
+            self.writer.open()
+            self.connections = {
+                topic: self.writer.add_connection(
+                    topic, kind, msgdef=facts(kind)["msgdef"], rihs01=facts(kind)["rihs01"]
+                )
+                for topic, kind in output_topics(options)
+            }
+        except BaseException:
+            shutil.rmtree(self.staging, ignore_errors=True)
+            raise
         self.topics = [topic for topic, _ in output_topics(options)]
         self._templates = encoder.Templates(settings.frame_prefix)
         self._multi_dof = [self.connections[self.names.resolve(topic)] for topic in (LINK_STATES, COM_STATES)]
