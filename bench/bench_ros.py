@@ -42,7 +42,8 @@ def main() -> None:
     parser.add_argument("--rates", default="500,1000,2000")
     parser.add_argument("--robots", default="arm,humanoid", help="which robots (comma-separated)")
     parser.add_argument("--modes", default="fixed_lag,causal")
-    parser.add_argument("--depth", type=int, default=10, help="the node's qos_depth")
+    parser.add_argument("--fixed-window", action="store_true", help="estimator.adaptive false (the fixed window)")
+    parser.add_argument("--depth", type=int, default=500, help="the node's qos_depth (its default: 500)")
     args = parser.parse_args()
     if not os.environ.get("NEFORWARD_ROS_PYTHON") and (ROOT / ".venv-ros" / "bin" / "python").exists():
         os.environ["NEFORWARD_ROS_PYTHON"] = str(ROOT / ".venv-ros" / "bin" / "python")
@@ -83,7 +84,8 @@ def main() -> None:
             params = directory / f"{path.stem}-{mode}.yaml"
             params.write_text(
                 f"/**/neforward:\n  ros__parameters:\n    qos_depth: {args.depth}\n    estimator:\n"
-                f"      mode: {mode}\n    robot_description: {json.dumps(path.read_text())}\n"
+                f"      mode: {mode}\n      adaptive: {'false' if args.fixed_window else 'true'}\n"
+                f"    robot_description: {json.dumps(path.read_text())}\n"
             )
             for rate in (float(r) for r in args.rates.split(",")):
                 results = {}

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from neforward_ros import forward_recursion, load_model
+from neforward_ros.estimation import native_fit
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
 
@@ -46,6 +47,7 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0)
     args = parser.parse_args()
     model = load_model(URDF)
+    native_fit.FIT.get(wait=True)  # the steady state: the adaptive fit compiled (the first run builds it)
     names = list(model.joint_names)
     shifts = np.linspace(0.0, 2.0, len(names))
     count = int(args.seconds * 500)

@@ -59,8 +59,10 @@ class ThrottledLog:
         self._log(level, message)
         return True
 
-    def every(self, key: Hashable, level: int, message: str) -> bool:
-        """Log at most once per period for ``key``, saying how many were suppressed in between."""
+    def every(self, key: Hashable, level: int, message: str | Callable[[], str]) -> bool:
+        """Log at most once per period for ``key``, saying how many were suppressed in between.
+        ``message`` may be a function that makes it: called only when the line is written (a check
+        that fails at every message costs no formatting)."""
         now = self._clock()
         last = self._last.get(key)
         if last is not None and now - last < self._period:
@@ -68,7 +70,8 @@ class ThrottledLog:
             return False
         skipped = self._suppressed.pop(key, 0)
         self._last[key] = now
-        self._log(level, f"{message} ({skipped} more like this since the last report)" if skipped else message)
+        text = message() if callable(message) else message
+        self._log(level, f"{text} ({skipped} more like this since the last report)" if skipped else text)
         return True
 
 

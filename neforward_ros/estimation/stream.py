@@ -17,6 +17,7 @@ import logging
 import math
 from collections import deque
 from collections.abc import Iterable, Sequence
+from functools import partial
 
 import numpy as np
 
@@ -428,16 +429,17 @@ class StreamingEstimator:
         self._strain[joints] = (1.0 - STRAIN_MEMORY) * self._strain[joints] + STRAIN_MEMORY * smallest
         self._watched[joints] += 1
         for j in joints[(self._strain[joints] > STRAIN_LIMIT) & (self._watched[joints] > 2 / STRAIN_MEMORY)]:
-            interval = float(np.median(np.diff(group.stamps[-9:]))) / NS if len(group) > 8 else float("nan")
-            self._log.every(
-                ("estimate-fit", int(j)),
-                logging.WARNING,
-                f"joint {self.joint_names[j]!r}: {self._strain[j]:.0%} of its recent estimates strained (the smallest "
-                f"window its samples allow, or samples that vary beyond a smooth motion; a sample every "
-                f"{interval * 1e3:.3g} ms): its motion changes about as fast as the joint states can show it, or their "
-                "noise is large, and its acceleration may be off by more than its stated uncertainty; raise the "
-                "joint-state rate (or, for less delay, estimator.method kalman)",
-            )
+            self._log.every(("estimate-fit", int(j)), logging.WARNING, partial(self._strained, group, int(j)))
+
+    def _strained(self, group: JointHistory, j: int) -> str:
+        interval = float(np.median(np.diff(group.stamps[-9:]))) / NS if len(group) > 8 else float("nan")
+        return (
+            f"joint {self.joint_names[j]!r}: {self._strain[j]:.0%} of its recent estimates strained (the smallest "
+            f"window its samples allow, or samples that vary beyond a smooth motion; a sample every "
+            f"{interval * 1e3:.3g} ms): its motion changes about as fast as the joint states can show it, or their "
+            "noise is large, and its acceleration may be off by more than its stated uncertainty; raise the "
+            "joint-state rate (or, for less delay, estimator.method kalman)"
+        )
 
     def _watch_innovations(self, group: JointHistory) -> None:
         """kalman: each joint's normalised innovations (about the last 50 samples), 1 on average
@@ -478,10 +480,13 @@ class StreamingEstimator:
                 what = f"{ratio:.3g} times their expected size: the noise is set higher than it is"
             else:
                 continue
+            name = self.joint_names[j]
             self._log.every(
                 ("estimate-fit", int(j)),
                 logging.WARNING,
-                f"joint {self.joint_names[j]!r}: the kalman estimator's innovations are {what}; {fix}",
+                lambda name=name, what=what, fix=fix: (
+                    f"joint {name!r}: the kalman estimator's innovations are {what}; {fix}"
+                ),
             )
 
     def _say_why(self, group: JointHistory, reason: str) -> None:
