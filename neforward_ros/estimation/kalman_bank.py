@@ -164,7 +164,9 @@ class KalmanBank:
         """A measurement variance for the whole group: the median of its joints' (white noise, or an
         encoder's step / sqrt(12)), from the samples kept; the fallback's until there are 32. The
         step is the smallest change seen since the start, kept through dwells (where no sample
-        changes and the recent samples alone would say nothing)."""
+        changes and the recent samples alone would say nothing). Joints that have not moved since
+        the start say nothing of the noise and are left out of the median (with them, a group whose
+        other joints still rest would take a noise of zero and trust every sample beyond measure)."""
         if len(samples) < NOISE_WINDOW:
             known = self.known_noise.get(kind)
             if known is not None:
@@ -178,7 +180,11 @@ class KalmanBank:
         self._steps[kind] = seen
         known = np.where(np.isfinite(seen), seen, 0.0)
         variance = np.maximum(white**2, known**2 / 12.0)
-        found = float(max(np.median(variance), (fallback * 1e-4) ** 2))
+        told = np.isfinite(seen) | (white > 0.0)
+        if not told.any():
+            known = self.known_noise.get(kind)
+            return known if known is not None else fallback**2
+        found = float(max(np.median(variance[told]), (fallback * 1e-4) ** 2))
         self.read_noise[kind] = found
         return found
 
