@@ -323,19 +323,11 @@ def fit(
 ) -> tuple[np.ndarray, ...] | None:
     """The C function's value, first and second derivative, standard deviation and strain (n,) each;
     None where the Python function must serve (too few samples, an order above MAX_ORDER)."""
-    if order > MAX_ORDER:
+    got = fits(library, times, values, np.array([target], dtype=float), half_widths, leads, order, derivative,
+               gamma, roughness, sixth_gain, floor)  # fmt: skip
+    if got is None or not got[1][0]:
         return None
-    times = np.ascontiguousarray(times, dtype=float)
-    values = np.ascontiguousarray(values, dtype=float)
-    derivative = _longs(derivative)
-    n = values.shape[1]
-    out = np.empty((5, n))
-    status = library.adaptive_fit(len(times), times.ctypes.data, values.ctypes.data, n, float(target),
-                                  len(half_widths), half_widths.ctypes.data, leads.ctypes.data, order,
-                                  derivative.ctypes.data, gamma, roughness, sixth_gain, floor,
-                                  out.ctypes.data)  # fmt: skip
-    if status != 0:
-        return None
+    out = got[0][0]
     return out[0], out[1], out[2], out[3], out[4] > 0.5
 
 
@@ -353,8 +345,9 @@ def fits(
     sixth_gain: float,
     floor: float,
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """:func:`fit` at every target over the whole of ``times, values``: (M, 5, n) and whether each
-    target was done (M,) (where not, the Python function must serve); None above MAX_ORDER."""
+    """The C function at every target over the whole of ``times, values``: value, first and second
+    derivative, standard deviation and strain (M, 5, n), and whether each target was done (M,)
+    (where not, the Python function must serve); None above MAX_ORDER."""
     if order > MAX_ORDER:
         return None
     times = np.ascontiguousarray(times, dtype=float)
