@@ -184,16 +184,14 @@ def compute(
         root, world = root_and_world(model, q, qd, qdd, base, settings.world_states)
     table = kinematics_table(model, q, qd, qdd, root)
     result = make_result(model, stamps, table, determined)
-    if settings.imu_links and states.acceleration_std is not None:
-        spread = states.acceleration_std if single or rows is None else states.acceleration_std[rows]
+    spread = states.acceleration_std
+    if spread is not None and not single and rows is not None:
+        spread = spread[rows]
+    if settings.imu_links and spread is not None:
         result = replace(result, imu_covariance=imu_covariances(model, table, spread, settings.imu_links))
     if settings.publish_joint_estimates:
-        spread = states.acceleration_std
-        if spread is None:
-            spread = np.full_like(q, np.nan)
-        elif not single and rows is not None:
-            spread = spread[rows]
-        result = replace(result, joints=JointMotion(model.joint_names, q, qd, qdd, spread, known))
+        stated = spread if spread is not None else np.full_like(q, np.nan)
+        result = replace(result, joints=JointMotion(model.joint_names, q, qd, qdd, stated, known))
     if world is not None and (not single or np.isfinite(world[0]).all()):
         result = replace(result, world=world)
     if settings.dynamics_needed and (not single or determined is None):

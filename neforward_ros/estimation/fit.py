@@ -175,20 +175,15 @@ def fit_at(
 
 
 def fit_window(
-    times: np.ndarray, values: np.ndarray, target_s: float, half_width: float, order: int, variance: bool = False
-) -> tuple[np.ndarray, ...]:
-    """The fit of :func:`fit_at` on exactly the samples given (at least order + 1 of them); with
-    ``variance``, also the variance factors of the first and second derivative for unit white noise."""
+    times: np.ndarray, values: np.ndarray, target_s: float, half_width: float, order: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The fit of :func:`fit_at` on exactly the samples given (at least order + 1 of them)."""
     tau = (times - target_s) / half_width
     basis = np.vander(tau, order + 1, increasing=True)  # powers by repeated products, as local_polynomial
     transposed = basis.T
     gram = transposed @ basis
     coefficients = np.linalg.solve(gram, transposed @ values)
-    out = coefficients[0], coefficients[1] / half_width, 2.0 * coefficients[2] / half_width**2
-    if not variance:
-        return out
-    inverse = np.linalg.inv(gram)
-    return (*out, inverse[1, 1] / half_width**2, 4.0 * inverse[2, 2] / half_width**4)
+    return coefficients[0], coefficients[1] / half_width, 2.0 * coefficients[2] / half_width**2
 
 
 def local_difference(

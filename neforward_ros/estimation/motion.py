@@ -124,6 +124,7 @@ class MotionModel:
         self.readout[0] = self.position_row
         self.readout[1] = self.velocity_row
         self.readout[2, [2, 5]] = (1.0, lam * lam)
+        self._transitions: dict[float, tuple[np.ndarray, np.ndarray]] = {}  # see transition()
         self.prior = np.zeros((self.dim, self.dim))
         self.prior[:3, :3] = np.diag(np.square(TREND_PRIOR))
         self.prior[3:, 3:] = self._stationary
@@ -131,7 +132,7 @@ class MotionModel:
     def transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """(F, Q) over dt seconds: x(t + dt) = F x(t) + w, w ~ N(0, Q). Kept for the intervals seen
         last (a steady rate has one or two): read-only arrays."""
-        cache = self.__dict__.setdefault("_transitions", {})
+        cache = self._transitions
         found = cache.get(dt)
         if found is None:
             if len(cache) >= 64:

@@ -18,16 +18,11 @@ compiler or ``NEFORWARD_NATIVE=off``, the Python function serves.
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import shutil
 import subprocess
-import sys
 import threading
-from pathlib import Path
 
 import numpy as np
 
-from neforward_ros import disk_cache
 from neforward_ros.kinematics import native
 
 WORTH_WAITING = 5000
@@ -251,24 +246,21 @@ class NativeAdaptiveFit:
             thread.join()
         return self._library
 
-    def _path(self, cc: str) -> Path | None:
-        folder = disk_cache.directory()
-        if folder is None:
-            return None
-        digest = hashlib.sha256("\n".join([SOURCE, cc, *FLAGS, sys.platform]).encode()).hexdigest()
-        return folder / "kernels" / f"adaptive_fit-{digest[:32]}.so"
-
     def _load(self) -> bool:
+        """Take the library built before; True when there is nothing to build (it was there, or
+        there is no compiler and the Python function serves)."""
         cc = native.compiler()
         if cc is None:
-            return True  # nothing to build: the Python function serves
-        path = self._path(cc)
-        if path is None or not path.exists():
+            return True
+        path = native.cache_path("adaptive_fit", SOURCE, cc, FLAGS)
+        library = native.load_cached(path)
+        if library is None:
             return False
         try:
-            self._library = _declare(ctypes.CDLL(str(path)))
-        except (OSError, AttributeError):
-            path.unlink(missing_ok=True)
+            self._library = _declare(library)
+        except AttributeError:
+            if path is not None:
+                path.unlink(missing_ok=True)
             return False
         return True
 
@@ -277,19 +269,10 @@ class NativeAdaptiveFit:
         if cc is None:
             return
         try:
-            library = native.compile_library(cc, SOURCE, list(FLAGS))
-        except (OSError, subprocess.SubprocessError, ValueError):
-            return
-        try:
-            function = _declare(ctypes.CDLL(str(library)))
-            path = self._path(cc)
-            if path is not None:
-                native.keep(library, path)
-        except (OSError, AttributeError):
-            return
-        finally:
-            shutil.rmtree(library.parent, ignore_errors=True)
-        self._library = function
+            library = native.build_library(cc, SOURCE, FLAGS, native.cache_path("adaptive_fit", SOURCE, cc, FLAGS))
+            self._library = _declare(library)
+        except (OSError, subprocess.SubprocessError, ValueError, AttributeError):
+            return  # the Python function serves
 
 
 def _declare(library: ctypes.CDLL) -> ctypes.CDLL:

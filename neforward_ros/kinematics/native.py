@@ -183,11 +183,7 @@ class NativeKernel:
         return self._function
 
     def _path(self, source: str, cc: str, flags: tuple[str, ...]) -> Path | None:
-        folder = disk_cache.directory()
-        if folder is None:
-            return None
-        digest = hashlib.sha256("\n".join([source, cc, *flags, *COMMON, sys.platform]).encode()).hexdigest()
-        return folder / "kernels" / f"{self._name}-{digest[:32]}.so"
+        return cache_path(self._name, source, cc, [*flags, *COMMON])
 
     def _load(self) -> None:
         """Take a library built before, the optimized one first."""
@@ -199,12 +195,14 @@ class NativeKernel:
         source, inputs, outputs = self._translated
         for flags in (OPTIMIZED, QUICK):
             path = self._path(source, cc, flags)
-            if path is None or not path.exists():
+            library = load_cached(path)
+            if library is None:
                 continue
             try:
-                self._function = NativeFunction(getattr(ctypes.CDLL(str(path)), self._name), inputs, outputs)
-            except (OSError, AttributeError):
-                path.unlink(missing_ok=True)  # a library that does not load: built anew
+                self._function = NativeFunction(getattr(library, self._name), inputs, outputs)
+            except AttributeError:
+                if path is not None:
+                    path.unlink(missing_ok=True)  # a library that does not load: built anew
                 continue
             self._optimized = flags == OPTIMIZED
             return
@@ -225,14 +223,8 @@ class NativeKernel:
         try:
             if cc is None:
                 raise OSError("no C compiler")
-            library = compile_library(cc, source, [*flags, *COMMON])
-            try:
-                function = NativeFunction(getattr(ctypes.CDLL(str(library)), self._name), inputs, outputs)
-                if path is not None:
-                    keep(library, path)
-            finally:
-                shutil.rmtree(library.parent, ignore_errors=True)
-            return function
+            library = build_library(cc, source, [*flags, *COMMON], path)
+            return NativeFunction(getattr(library, self._name), inputs, outputs)
         except (OSError, subprocess.SubprocessError, ValueError, AttributeError):
             if self._function is None:
                 self._failed = True
@@ -241,6 +233,45 @@ class NativeKernel:
 
 _BUILDS: set[subprocess.Popen] = set()
 """Compilers running now: stopped when the process exits (a thread's build is not waited for)."""
+
+
+def cache_path(name: str, source: str, cc: str, flags: Sequence[str]) -> Path | None:
+    """Where the library of ``source`` built by ``cc`` with ``flags`` is kept in the disk cache
+    (``kernels/<name>-<hash>.so``); None when the cache is off."""
+    folder = disk_cache.directory()
+    if folder is None:
+        return None
+    digest = hashlib.sha256("\n".join([source, cc, *flags, sys.platform]).encode()).hexdigest()
+    return folder / "kernels" / f"{name}-{digest[:32]}.so"
+
+
+def load_cached(path: Path | None) -> ctypes.CDLL | None:
+    """The library kept at ``path``, or None (none there; one that does not load is removed, to be
+    built anew)."""
+    if path is None or not path.exists():
+        return None
+    try:
+        return ctypes.CDLL(str(path))
+    except OSError:
+        path.unlink(missing_ok=True)
+        return None
+
+
+def build_library(cc: str, source: str, flags: Sequence[str], path: Path | None) -> ctypes.CDLL:
+    """Compile ``source``, load it, and keep it at ``path`` (the disk cache's, or None).
+
+    Raises:
+        OSError, subprocess.SubprocessError: the compiler did not run or failed, or the library does
+            not load.
+    """
+    library = compile_library(cc, source, list(flags))
+    try:
+        loaded = ctypes.CDLL(str(library))
+        if path is not None:
+            keep(library, path)  # loaded already: the copy is for other processes
+        return loaded
+    finally:
+        shutil.rmtree(library.parent, ignore_errors=True)
 
 
 def keep(library: Path, path: Path) -> None:
