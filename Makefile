@@ -12,7 +12,7 @@ BIN := $(VENV)/bin
 ROS_SETUP ?= /opt/ros/jazzy/setup.bash
 ROS_SYSTEM_PYTHON ?= /usr/bin/python3
 ROS_VENV := .venv-ros
-ROS_PIP_PACKAGES := rosbags cyclonedds xacro
+ROS_PIP_PACKAGES := rosbags cyclonedds xacro yourdfpy
 HAVE_ROS := $(wildcard $(ROS_SETUP))
 
 .PHONY: demo test bench clean

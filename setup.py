@@ -19,6 +19,8 @@ setup(
         "setuptools",
         "numpy>=1.24",
         "pyyaml>=6",
+        # the URDF library: its element readers (URDF._parse_joint, _parse_inertial ...) are used
+        "yourdfpy>=0.0.53,<0.1",
         "rosbags>=0.10",
         "cyclonedds>=0.10.5",
     ],

@@ -137,6 +137,24 @@ def check_against_pinocchio(model, pmodel, seed: int) -> None:
         assert_close(inverse_dynamics(model, q, qd, qdd, gravity=GRAVITY).joint_torque, tau, TOLERANCE, "single")
 
 
+def yourdfpy_difference(path: Path, model) -> str:
+    """How yourdfpy's own ``URDF.load`` would read a file otherwise than urdfdom, or "": it refuses it,
+    or a link's <inertial> fails urdfdom's reading (yourdfpy gives a missing ixx, iyy or izz 1 kg m^2)."""
+    import logging
+
+    import yourdfpy
+
+    logging.getLogger("yourdfpy").disabled = True  # it logs the first parse's error before recovering
+    try:
+        yourdfpy.URDF.load(str(path), build_scene_graph=False, load_meshes=False)
+    except Exception as exc:  # yourdfpy raises whatever its parse meets
+        return f"yourdfpy refuses it: {type(exc).__name__}: {exc}"
+    finally:
+        logging.getLogger("yourdfpy").disabled = False
+    failed = [w.split(":")[0] for w in model.inertia_warnings if "urdfdom" in w]
+    return f"<inertial> read as urdfdom reads it: {', '.join(failed)}" if failed else ""
+
+
 @pytest.mark.parametrize("corpus", sorted(CORPORA))
 def test_every_published_urdf_loads_from_file_and_text_without_xacro_and_agrees_with_pinocchio(
     corpus: str, without_xacro, capsys
@@ -147,6 +165,7 @@ def test_every_published_urdf_loads_from_file_and_text_without_xacro_and_agrees_
         pytest.skip(f"{corpus} is not installed: {install}")
     built = agreed = 0
     refused = []
+    differs = []  # files Pinocchio builds where yourdfpy's own URDF.load reads otherwise than urdfdom
     quiet = lambda level, message: None  # noqa: E731  (the models' warnings are tested elsewhere)
     for number, path in enumerate(files):
         text = path.read_text(errors="replace")
@@ -159,6 +178,10 @@ def test_every_published_urdf_loads_from_file_and_text_without_xacro_and_agrees_
             refused.append(f"{path.name} ({exc})")
             continue
         assert from_file == from_text, path.name
+        if pmodel is not None:
+            difference = yourdfpy_difference(path, from_file)
+            if difference:
+                differs.append(f"{path.name} ({difference})")
         if pmodel is None:
             continue
         built += 1
@@ -168,6 +191,126 @@ def test_every_published_urdf_loads_from_file_and_text_without_xacro_and_agrees_
         print(
             f"\n{corpus}: {agreed} of {built} URDFs that Pinocchio builds load (file and text, no xacro) and agree "
             f"with it to {TOLERANCE:g}; {len(files)} files in all; refused, as Pinocchio refuses them: "
-            f"{'; '.join(refused[:5]) or 'none'}{' ...' if len(refused) > 5 else ''}"
+            f"{'; '.join(refused[:5]) or 'none'}{' ...' if len(refused) > 5 else ''}. Where yourdfpy's URDF.load "
+            f"alone reads otherwise than urdfdom, and this package follows urdfdom: {len(differs)} files: "
+            f"{'; '.join(differs[:5]) or 'none'}{' ...' if len(differs) > 5 else ''}"
         )
     assert agreed == built and built >= least
+
+
+def _one_link_robot(link_body: str) -> str:
+    """A revolute joint carrying link ``l1`` (with ``link_body``) and a second joint below it, so that
+    ``l1``'s mass, centre of mass and inertia all enter the joint torques."""
+    return (
+        '<robot name="r"><link name="base"/>'
+        f'<link name="l1">{link_body}</link>'
+        '<link name="l2"><inertial><origin xyz="0 0.1 0"/><mass value="1"/>'
+        '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.03"/></inertial></link>'
+        '<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 1 1"/>'
+        '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+        '<joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.3 0 0"/>'
+        '<axis xyz="1 0 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>'
+    )
+
+
+COMPLETE = '<inertia ixx="0.1" ixy="0.01" ixz="0" iyy="0.2" iyz="0" izz="0.3"/>'
+FAILING_INERTIALS = {
+    # what urdfdom fails on -> (the <inertial>, what the warning says urdfdom keeps)
+    "no <inertia>": ('<origin xyz="0.1 0.2 0.3" rpy="0.3 0 0"/><mass value="2.0"/>', "keeps its mass (2 kg)"),
+    "products missing": (
+        '<origin xyz="0.1 0.2 0.3"/><mass value="2.0"/><inertia ixx="0.1" iyy="0.2" izz="0.3"/>',
+        "<inertia> without ixy ixz iyz",
+    ),
+    "a moment not a number": (
+        '<origin xyz="0.1 0.2 0.3"/><mass value="2"/>' + COMPLETE.replace('iyy="0.2"', 'iyy="x"'),
+        "not a finite number",
+    ),
+    "no <mass>": ('<origin xyz="0.1 0.2 0.3"/>' + COMPLETE, "massless"),
+    "<mass> without value": ('<origin xyz="0.1 0.2 0.3"/><mass/>' + COMPLETE, "massless"),
+    "mass with a unit": ('<mass value="2kg"/>' + COMPLETE, "massless"),
+    "mass nan": ('<mass value="nan"/>' + COMPLETE, "massless"),
+    "origin of two numbers": ('<origin xyz="0.1 0.2"/><mass value="2"/>' + COMPLETE, "massless"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(FAILING_INERTIALS))
+def test_a_link_whose_inertial_fails_loads_as_urdfdom_loads_it(case: str) -> None:
+    """urdfdom ignores parseLink's failure: the link stays, with what was read before the failure
+    (yourdfpy would give a missing ixx, iyy or izz 1 kg m^2). Pinocchio, which reads with urdfdom,
+    is the oracle: link motion and joint torques agree, and the warning says what was kept."""
+    inertial, said = FAILING_INERTIALS[case]
+    text = _one_link_robot(f"<inertial>{inertial}</inertial>")
+    said_here: list[str] = []
+    model = load_model(text, log=lambda level, message: said_here.append(message))
+    assert model.link_names == ("base", "l1", "l2")
+    assert len(model.inertia_warnings) == 1 and said in model.inertia_warnings[0], model.inertia_warnings
+    assert "link 'l1'" in model.inertia_warnings[0]
+    check_against_pinocchio(model, pin.buildModelFromXML(text), seed=7)
+
+
+def test_the_complete_inertial_of_the_same_link_agrees_too() -> None:
+    """The control for the test above: the full <inertial> is read, with no warning."""
+    text = _one_link_robot(f'<inertial><origin xyz="0.1 0.2 0.3" rpy="0.3 0 0"/><mass value="2"/>{COMPLETE}</inertial>')
+    model = load_model(text)
+    assert model.inertia_warnings == () and model.mass[1] == 2.0
+    check_against_pinocchio(model, pin.buildModelFromXML(text), seed=8)
+
+
+@pytest.mark.parametrize("geometry", ["<capsule radius='0.1' length='0.2'/>", "<plane normal='0 0 1'/>", ""])
+def test_a_geometry_urdfdom_cannot_read_does_not_stop_the_model(geometry: str) -> None:
+    """yourdfpy refuses a whole file for a <visual> geometry it does not know (pybullet's <capsule>,
+    <plane>); urdfdom drops the link's visuals and keeps the link; nothing here reads visuals."""
+    inertial = f'<inertial><mass value="2"/>{COMPLETE}</inertial>'
+    text = _one_link_robot(f"{inertial}<visual><geometry>{geometry}</geometry></visual>")
+    model = load_model(text)
+    assert model.mass[1] == 2.0 and model.inertia_warnings == ()
+    check_against_pinocchio(model, pin.buildModelFromXML(text), seed=9)
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (('<origin xyz="0.3 0 0"/>', '<origin xyz="0.3 0 0" rpy="0 0 0 1"/>'), "<origin rpy>: '0 0 0 1' is not three"),
+        (('<origin xyz="0.3 0 0"/>', '<origin xyz="0.3 0 0 0"/>'), "<origin xyz>: '0.3 0 0 0' is not three"),
+        (('upper="1" effort', 'upper="1." effort'), None),  # urdfdom reads "1." as 1, as Python does
+        (('upper="1" effort', 'upper="1.5." effort'), "could not convert string to float: '1.5.'"),
+    ],
+)
+def test_what_yourdfpy_reads_leniently_urdfdom_refuses_and_so_does_load_model(change, message) -> None:
+    """yourdfpy cuts a four-number rpy to three and a four-number xyz to three; urdfdom refuses both,
+    and a limit that is not a number."""
+    text = _one_link_robot(f'<inertial><mass value="2"/>{COMPLETE}</inertial>').replace(*change, 1)
+    pmodel = pinocchio_model(text)
+    if message is None:
+        assert pmodel is not None
+        check_against_pinocchio(load_model(text), pmodel, seed=10)
+        return
+    assert pmodel is None
+    with pytest.raises(ModelError, match=r"joint .j[12]. \(line 1\)") as info:
+        load_model(text)
+    assert message in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "document",
+    [
+        '<robot name="r"><link name="a"/><link name="b"></robot>',  # mismatched tags
+        '<robot name="r"><link name="a"/><link name="b',  # truncated, as a half-received description
+        '<robot name="r"><link name="a" name="b"/></robot>',
+    ],
+)
+def test_a_broken_document_is_refused_though_lxml_could_recover_part_of_it(document: str) -> None:
+    """libxml2's recovery, which yourdfpy falls back on, would load the part before the break: a
+    truncated robot_description would be a smaller robot. TinyXML2 (urdfdom) refuses these."""
+    assert pinocchio_model(document) is None
+    with pytest.raises(ModelError, match=r"malformed URDF XML: .* at line 1"):
+        load_model(document)
+
+
+def test_what_tinyxml2_tolerates_loads() -> None:
+    """An undeclared prefix, -- in a comment and a bare & load, as urdfdom loads them."""
+    text = _one_link_robot(f'<inertial><mass value="2"/>{COMPLETE}</inertial>')
+    text = text.replace('<link name="base"/>', '<!-- ---- base -- --><link name="base" gazebo:x="a & b"/><gz:plugin/>')
+    pmodel = pinocchio_model(text)
+    assert pmodel is not None
+    check_against_pinocchio(load_model(text), pmodel, seed=11)

@@ -17,9 +17,11 @@ KDL and Pinocchio read it:
   robot_state_publisher) takes it; a joint state cannot drive it. (A floating joint between the
   URDF's root, a world link, and the robot is the robot's floating base.)
 
-Masses and inertias that no rigid body has (a negative mass, a negative principal moment beyond
-rounding, principal moments breaking the triangle inequality) are used as given, as Pinocchio uses
-them, and listed in :attr:`RobotModel.inertia_warnings`: only the backward pass uses them.
+A link whose ``<inertial>`` fails to read keeps what urdfdom keeps (:mod:`.urdf`), said in
+:attr:`RobotModel.inertia_warnings`. Masses and inertias that no rigid body has (a negative mass, a
+negative principal moment beyond rounding, principal moments breaking the triangle inequality) are
+used as given, as Pinocchio uses them, and listed in :attr:`RobotModel.inertia_warnings`: only the
+backward pass uses them.
 """
 
 from __future__ import annotations
@@ -249,7 +251,7 @@ def _inertia(link: UrdfLink) -> tuple[float, Vec3, Mat3, str]:
             f"principal moments ({', '.join(f'{m:.6g}' for m in moments)} kg m^2) that break the triangle "
             f"inequality (the two smaller sum to {100 * shortfall:.3g} % less than the largest)"
         )
-    warning = ""
+    warning = link.problem
     if problems:
         warning = (
             f"link {link.name!r} (line {link.line}) has {' and '.join(problems)}: no rigid body has this inertia; "

@@ -1,7 +1,8 @@
 """``load_model``: a URDF file or text -> a :class:`RobotModel`.
 
-Reading a URDF takes milliseconds (expat and the tree; 9 ms for a 130-link, 200 kB description), so
-nothing is kept between runs."""
+The XML is parsed by lxml and read by yourdfpy (:mod:`.document`, :mod:`.urdf`); yourdfpy is imported
+the first time a model is loaded (:mod:`.reader`). Reading a URDF then takes milliseconds, so nothing is
+kept between runs."""
 
 from __future__ import annotations
 
@@ -13,9 +14,9 @@ from neforward_ros.errors import ModelError
 from neforward_ros.logs import LogFunction, python_log
 from neforward_ros.model import xacro
 from neforward_ros.model.build import build_model
+from neforward_ros.model.document import parse_document, text_encoding
 from neforward_ros.model.types import RobotModel
 from neforward_ros.model.urdf import read_robot
-from neforward_ros.model.xml_tree import decode, parse_xml
 
 
 def load_model(
@@ -42,8 +43,8 @@ def load_model(
             xacro file cannot be expanded (or the ``xacro`` package is missing: the message says how
             to expand it), or XML text uses xacro. The message names the element and its line.
     """
-    text, path = _read_source(source)
-    model = _parse(text, path, root_link)
+    data, path = _read_source(source)
+    model = _parse(data, path, root_link)
     say = log if log is not None else python_log()
     for warning in model.warnings:
         say(logging.WARNING, warning)
@@ -56,14 +57,15 @@ def description_text(path: str | os.PathLike[str]) -> str:
     Raises:
         ModelError: as :func:`load_model`.
     """
-    text, file = _read_source(os.fspath(path))
-    if file is not None and (file.endswith(".xacro") or xacro.xacro_use(parse_xml(text)).needed is not None):
-        return decode(xacro.expand(file))
-    return text
+    data, file = _read_source(os.fspath(path))
+    root = parse_document(data)
+    if file is not None and (file.endswith(".xacro") or xacro.xacro_use(root).needed is not None):
+        return xacro.expand(file).decode("utf-8")
+    return data if isinstance(data, str) else data.decode(text_encoding(root), errors="replace")
 
 
-def _read_source(source: str | os.PathLike[str]) -> tuple[str, str | None]:
-    """(the text, the file's path or None for XML text)."""
+def _read_source(source: str | os.PathLike[str]) -> tuple[bytes | str, str | None]:
+    """(the file's bytes or the XML text, the file's path or None for XML text)."""
     if isinstance(source, str) and source.lstrip().startswith("<"):
         return source, None
     if not isinstance(source, (str, os.PathLike)):
@@ -76,14 +78,14 @@ def _read_source(source: str | os.PathLike[str]) -> tuple[str, str | None]:
             data = stream.read()
     except OSError as exc:
         raise ModelError(f"cannot read URDF file {path!r}: {exc.strerror or exc}") from exc
-    return decode(data), path
+    return data, path
 
 
-def _parse(text: str, path: str | None, root_link: str | None) -> RobotModel:
-    root = parse_xml(text)
+def _parse(data: bytes | str, path: str | None, root_link: str | None) -> RobotModel:
+    root = parse_document(data)
     use = xacro.xacro_use(root)
     if path is not None and (path.endswith(".xacro") or use.needed is not None):
-        root = parse_xml(decode(xacro.expand(path)))
+        root = parse_document(xacro.expand(path))
         use = xacro.xacro_use(root)
     if use.needed is not None:
         raise ModelError(

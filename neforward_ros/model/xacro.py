@@ -13,9 +13,10 @@ urdfdom ignores it, and said once.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from neforward_ros.errors import ModelError
-from neforward_ros.model.xml_tree import Element
+from neforward_ros.model.document import children
 
 NAMESPACE_MARK = "ros.org/wiki/xacro"
 """What every xacro namespace URI holds (www.ros.org, ros.org, wiki.ros.org; with or without a slash or #)."""
@@ -32,55 +33,60 @@ class XacroUse:
     leftover: str | None
 
 
-def _prefixes(root: Element) -> set[str]:
-    """Element-name prefixes bound to the xacro namespace anywhere in the document, and ``xacro``."""
-    found = {"xacro"}
-    for element in root.iter():
-        for name, value in element.attrib.items():
-            if name.startswith("xmlns:") and NAMESPACE_MARK in value:
-                found.add(name[len("xmlns:") :])
-    return found
+def _xacro_name(tag: str, prefixes: set[str]) -> str | None:
+    """The local name of an element in the xacro namespace (``xacro:include`` -> ``include``), else None.
+    lxml names a declared namespace's element ``{uri}name``, and keeps an undeclared prefix as written."""
+    if tag.startswith("{"):
+        uri, _, name = tag[1:].partition("}")
+        return name if NAMESPACE_MARK in uri else None
+    prefix, colon, name = tag.partition(":")
+    return name if colon and prefix in prefixes else None
 
 
-def _substitution(element: Element) -> str | None:
+def _shown(element: Any, prefixes: set[str]) -> str:
+    name = _xacro_name(element.tag, prefixes)
+    return f"<{'xacro:' + name if name else element.tag}> at line {element.sourceline}"
+
+
+def _substitution(element: Any) -> str | None:
     """The first ``${`` or ``$(`` in the element's or its descendants' attributes or text."""
     for node in element.iter():
         for name, value in node.attrib.items():
             if "${" in value or "$(" in value:
-                return f'{name}="{value}" at line {node.line}'
-        if "${" in node.text or "$(" in node.text:
-            return f"{node.text.strip()[:60]!r} at line {node.line}"
+                return f'{name}="{value}" at line {node.sourceline}'
+        text = node.text or ""
+        if "${" in text or "$(" in text:
+            return f"{text.strip()[:60]!r} at line {node.sourceline}"
     return None
 
 
-def xacro_use(root: Element) -> XacroUse:
-    """The xacro markup of a description (see the module docstring)."""
-    prefixes = _prefixes(root)
-
-    def is_xacro(name: str) -> bool:
-        return ":" in name and name.split(":", 1)[0] in prefixes
+def xacro_use(root: Any) -> XacroUse:
+    """The xacro markup of a description (see the module docstring); ``root`` an lxml element."""
+    prefixes = {"xacro"} | {p for p, uri in root.nsmap.items() if p and uri and NAMESPACE_MARK in uri}
+    for element in root.iter():  # declarations below the root
+        prefixes |= {p for p, uri in element.nsmap.items() if p and uri and NAMESPACE_MARK in uri}
 
     needed = leftover = None
-    for child in root.children:
-        if is_xacro(child.tag):
-            what = f"<{child.tag}> at line {child.line}"
-            if child.tag.split(":", 1)[1] in _DEFINITIONS:
-                leftover = leftover or what
+    for child in children(root):
+        name = _xacro_name(child.tag, prefixes)
+        if name is not None:
+            if name in _DEFINITIONS:
+                leftover = leftover or _shown(child, prefixes)
             else:
-                needed = needed or what
+                needed = needed or _shown(child, prefixes)
         elif child.tag in _READ:
             for node in child.iter():
-                if is_xacro(node.tag):
-                    needed = needed or f"<{node.tag}> at line {node.line}"
+                if _xacro_name(node.tag, prefixes) is not None:
+                    needed = needed or _shown(node, prefixes)
             substitution = _substitution(child)
             if substitution is not None:
                 needed = needed or substitution
         elif leftover is None:
-            markup = next((f"<{n.tag}> at line {n.line}" for n in child.iter() if is_xacro(n.tag)), None)
+            markup = next((_shown(n, prefixes) for n in child.iter() if _xacro_name(n.tag, prefixes)), None)
             leftover = markup or _substitution(child)
     if leftover is None:  # <robot name="${name}">: urdfdom takes the name as it is
         leftover = next(
-            (f'{k}="{v}" at line {root.line}' for k, v in root.attrib.items() if "${" in v or "$(" in v), None
+            (f'{k}="{v}" at line {root.sourceline}' for k, v in root.attrib.items() if "${" in v or "$(" in v), None
         )
     return XacroUse(needed, leftover)
 
