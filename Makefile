@@ -15,7 +15,7 @@ ROS_VENV := .venv-ros
 ROS_PIP_PACKAGES := rosbags cyclonedds xacro yourdfpy
 HAVE_ROS := $(wildcard $(ROS_SETUP))
 
-.PHONY: demo test bench clean
+.PHONY: demo test docs bench clean
 
 demo: $(VENV)/.installed
 	$(BIN)/neforward demo
@@ -31,6 +31,11 @@ test: $(VENV)/.installed-test $(ROS_VENV)/.installed
 	@echo "make test: ROS 2 Jazzy found at $(ROS_SETUP): the ROS suite (test/ros) runs, on $(ROS_VENV)/bin/python"
 	NEFORWARD_REQUIRE_ROS=1 NEFORWARD_ROS_PYTHON=$(CURDIR)/$(ROS_VENV)/bin/python $(BIN)/python -m pytest
 endif
+
+# The documentation site (docs/, Sphinx with MyST Markdown), warnings as errors, into docs/_build/html.
+docs: $(VENV)/.installed-docs
+	$(BIN)/python -m sphinx -W --keep-going -q -b html docs docs/_build/html
+	@echo "make docs: the site is in docs/_build/html/index.html"
 
 bench: $(VENV)/.installed-test $(if $(HAVE_ROS),$(ROS_VENV)/.installed)
 	$(BIN)/python bench/bench_recursion.py
@@ -57,6 +62,10 @@ $(VENV)/.installed-test: $(BIN)/python setup.py setup.cfg package.xml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $@ $(VENV)/.installed
 
+$(VENV)/.installed-docs: $(BIN)/python setup.py setup.cfg package.xml
+	$(BIN)/python -m pip install --quiet -e '.[docs]'
+	touch $@ $(VENV)/.installed
+
 # --without-pip: Debian's ensurepip is a separate package; the system's pip serves the venv.
 $(ROS_VENV)/.installed: Makefile
 	rm -rf $(ROS_VENV)
@@ -66,4 +75,4 @@ $(ROS_VENV)/.installed: Makefile
 	touch $@
 
 clean:
-	rm -rf $(VENV) $(ROS_VENV) build *.egg-info .pytest_cache .ruff_cache
+	rm -rf $(VENV) $(ROS_VENV) build *.egg-info .pytest_cache .ruff_cache docs/_build

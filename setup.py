@@ -26,6 +26,7 @@ setup(
     ],
     extras_require={
         "plot": ["matplotlib>=3.6"],
+        "docs": ["sphinx>=7", "myst-parser>=2"],
         "test": [
             "pytest>=7",
             "pin>=3.4",

@@ -1,4 +1,4 @@
-"""The package's layout, as the README's module map describes it: layers that import only downwards,
+"""The package's layout, as docs/architecture.md's module map describes it: layers that import only downwards,
 no import cycles, the bag tool and the runtimes sharing the computation and never each other's
 internals, no module importing a command-line module, one module importing rclpy, and the core
 importable without ROS or a middleware."""
@@ -69,7 +69,7 @@ def layer(module: str) -> int:
     for number, names in enumerate(LAYERS):
         if top(module) in names:
             return number
-    raise AssertionError(f"{module} is in no layer of the module map: add it to LAYERS and the README")
+    raise AssertionError(f"{module} is in no layer of the module map: add it to LAYERS and docs/architecture.md")
 
 
 def test_no_import_cycles() -> None:

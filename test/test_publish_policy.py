@@ -136,10 +136,9 @@ def test_a_model_reload_warms_up_again() -> None:
     assert t.min() >= 0.5 + 0.2 - 1e-9  # nothing until the new estimator's 0.2 s window is covered
 
 
-def test_the_readme_says_what_the_arrays_hold_in_the_partial_case() -> None:
-    readme = (TEST_DIR.parent / "README.md").read_text()
-    section = readme[readme.index("### Partial robots") :]
-    section = section[: section.index("\n## ")]
+def test_the_node_guide_says_what_the_arrays_hold_in_the_partial_case() -> None:
+    guide = (TEST_DIR.parent / "docs" / "guides" / "node.md").read_text()
+    section = guide[guide.index("## Partial robots") :]
     for phrase in ("joint_names", "model's order", "publish_policy", "hold.positions", "max_gap", "neforward bag"):
         assert phrase in section, phrase
     assert re.search(r"`partial`.*default", section)

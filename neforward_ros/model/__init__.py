@@ -2,9 +2,10 @@
 computation shares.
 
 - :mod:`.types`: :class:`RobotModel`, :class:`ParentJoint`, :class:`JointKind`.
-- :mod:`.xml_tree`: XML as leniently as urdfdom reads it (no namespaces, ``--`` in comments).
+- :mod:`.document`: the XML parsed by lxml, accepted where urdfdom's TinyXML2 accepts it.
+- :mod:`.reader`: yourdfpy, the URDF library, imported quietly when a model is first loaded.
 - :mod:`.xacro`: whether a description needs xacro, and its expansion.
-- :mod:`.urdf`: the links and joints of a URDF, by urdfdom's rules.
+- :mod:`.urdf`: the links and joints of a URDF, read by yourdfpy, by urdfdom's rules.
 - :mod:`.build`: the checked tree, its root and joint columns; what is refused, what is warned.
 - :mod:`.load`: :func:`load_model`.
 - :mod:`.payload`: :func:`with_payload`, a point mass the URDF does not have.

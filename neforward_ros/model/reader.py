@@ -2,7 +2,8 @@
 
 Importing yourdfpy imports trimesh (about 0.6-1 s), so nothing imports it before a URDF is read.
 Its loggers (and trimesh's, which reports optional modules it misses at import) are held at ERROR
-while it is imported and used: a URDF's own doubtful points are said by the model's warnings.
+while it is imported; its element readers log nothing. A URDF's own doubtful points are said by the
+model's warnings.
 """
 
 from __future__ import annotations
