@@ -5,12 +5,13 @@ along a trajectory; and the inertia checks of the model."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from neforward_ros import InputError, ModelError, forward_recursion, inverse_dynamics, load_model
+from neforward_ros import InputError, forward_recursion, inverse_dynamics, load_model
 
 from conftest import TEST_ROBOTS, URDF_DIR, assert_close
 from oracle import GRAVITY, PinocchioOracle, pin
@@ -186,13 +187,21 @@ def _one_link(mass: str, inertia: str) -> str:
     )
 
 
-@pytest.mark.parametrize("mass, inertia", [
-    ("nan", 'ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"'),
-    ("1", 'ixx="inf" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"'),
+@pytest.mark.parametrize("mass, inertia, kept_mass", [
+    ("nan", 'ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"', 0.0),
+    ("1", 'ixx="inf" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"', 1.0),
 ])  # fmt: skip
-def test_a_mass_or_inertia_that_is_not_a_number_is_a_model_error_naming_the_link(mass: str, inertia: str) -> None:
-    with pytest.raises(ModelError, match=r"link 'b' .* is not a finite number"):
-        load_model(_one_link(mass, inertia))
+def test_a_mass_or_inertia_that_is_not_a_number_keeps_what_urdfdom_keeps_with_a_warning_naming_the_link(
+    mass: str, inertia: str, kept_mass: float
+) -> None:
+    """urdfdom's conversion refuses nan and inf, and it ignores the failure of the link: a mass that
+    is not a number leaves the link massless, an inertia that is not one leaves it without rotational
+    inertia (test_corpus checks these readings against Pinocchio)."""
+    model = load_model(_one_link(mass, inertia))
+    b = model.link_index["b"]
+    assert model.mass[b] == kept_mass and model.inertia_in_link[b] == (0.0,) * 9
+    assert len(model.inertia_warnings) == 1
+    assert re.search(r"link 'b' .* not a finite number", model.inertia_warnings[0]), model.inertia_warnings
 
 
 @pytest.mark.parametrize("mass, inertia, text", [
