@@ -64,9 +64,9 @@ def test_c_and_numpy_choose_the_same_windows_and_agree_to_rounding() -> None:
             # samples are all alike has estimates of rounding only)
             scale = np.abs(want[k]) + want[3] * h ** (2 - k) + 1e-5 * np.abs(y).max(axis=0) / h**k
             error = np.abs(got[k] - want[k])[moving] / scale[moving]
-            # rounding, through the conditioning of each degree's normal equations (a causal window of
-            # degree 5 is the worst: 1e-7)
-            bound = 1e-7 if lead < 0.05 and order == 5 else 1e-8
+            # rounding, through the conditioning of each degree's normal equations: a causal window is the
+            # worst conditioned (degree 5: 1e-7; degree 2 with numpy 2.4's summation: 1.3e-8)
+            bound = 1e-7 if lead < 0.05 else 1e-8
             assert np.all(error <= bound), (k, order, lead, error.max())
             worst = max(worst, float(error.max(initial=0.0)))
         np.testing.assert_allclose(got[3], want[3], rtol=1e-6)
@@ -103,3 +103,20 @@ def test_targets_with_too_few_samples_take_numpy_and_no_compiler_takes_numpy_eve
     monkeypatch.setenv("NEFORWARD_NATIVE", "off")
     fresh = native_fit.NativeAdaptiveFit()
     assert fresh.get(wait=True) is None
+
+
+def test_a_whole_recording_shared_among_threads_gives_the_very_same_numbers(monkeypatch) -> None:
+    """From PARALLEL_TARGETS targets on, the C fit runs on every core; each thread's targets come out
+    bitwise as one thread's would (a broken slice or pointer would shift or drop targets)."""
+    library()
+    rng = np.random.default_rng(6)
+    count, n = 5000, 3
+    t = np.sort(rng.uniform(0.0, 10.0, count))
+    y = np.cos(t[:, None] * np.arange(1, n + 1)) + rng.normal(0.0, 1e-4, (count, n))
+    monkeypatch.setattr(native_fit, "PARALLEL_TARGETS", 10**9)
+    serial = adaptive.adaptive_fits(t, y, t, 0.1, 4, 0.1)
+    monkeypatch.setattr(native_fit, "PARALLEL_TARGETS", 100)
+    monkeypatch.setattr(native_fit.os, "cpu_count", lambda: 3)  # three parts, also on a one-core machine
+    shared = adaptive.adaptive_fits(t, y, t, 0.1, 4, 0.1)
+    for k in range(4):
+        np.testing.assert_array_equal(shared[k], serial[k])

@@ -18,6 +18,8 @@ compiler or ``NEFORWARD_NATIVE=off``, the Python function serves.
 from __future__ import annotations
 
 import ctypes
+import itertools
+import os
 import subprocess
 import threading
 
@@ -339,11 +341,38 @@ def fits(
     n = values.shape[1]
     out = np.empty((len(targets), 5, n))
     status = np.empty(len(targets), dtype=np.intc)
-    library.adaptive_fits(len(times), times.ctypes.data, values.ctypes.data, n, len(targets), targets.ctypes.data,
-                          len(half_widths), half_widths.ctypes.data, leads.ctypes.data, order,
-                          _longs(derivative).ctypes.data, gamma, roughness, sixth_gain, floor, out.ctypes.data,
-                          status.ctypes.data)  # fmt: skip
+    half_widths = np.ascontiguousarray(half_widths, dtype=float)
+    leads = np.ascontiguousarray(leads, dtype=float)
+    derivative = _longs(derivative)
+
+    def run(part: slice) -> None:
+        count = part.stop - part.start
+        library.adaptive_fits(len(times), times.ctypes.data, values.ctypes.data, n, count,
+                              targets[part].ctypes.data, len(half_widths), half_widths.ctypes.data,
+                              leads.ctypes.data, order, derivative.ctypes.data, gamma, roughness, sixth_gain, floor,
+                              out[part].ctypes.data, status[part].ctypes.data)  # fmt: skip
+
+    # Each target is fitted on its own (the C function keeps nothing from one to the next), and a
+    # ctypes call releases the GIL: a whole recording's targets are shared among the cores.
+    workers = min(os.cpu_count() or 1, 8) if len(targets) >= PARALLEL_TARGETS else 1
+    bounds = np.linspace(0, len(targets), workers + 1).astype(int)
+    parts = [slice(int(a), int(b)) for a, b in itertools.pairwise(bounds.tolist())]
+    if workers == 1:
+        run(parts[0])
+    else:
+        threads = [threading.Thread(target=run, args=(part,), name="neforward-fit") for part in parts[1:]]
+        for thread in threads:
+            thread.start()
+        try:
+            run(parts[0])
+        finally:
+            for thread in threads:
+                thread.join()
     return out, status == 0
+
+
+PARALLEL_TARGETS = 20_000
+"""From this many targets on (a whole recording, not a message), :func:`fits` uses every core."""
 
 
 def _longs(values: np.ndarray) -> np.ndarray:
