@@ -10,7 +10,12 @@ URDF (compiled kernels, message-type facts; target at most 2), and cold, with an
 at most 3). Python's bytecode cache is on for the command, as in any install. Interleaved repeats;
 medians.
 
-Usage: python bench/bench_bag.py [--seconds 60] [--repeats 3]
+With ``--long`` (what ``make bench`` also runs): a 10-minute recording (300,000 joint states,
+positions only), and the peer is a whole Python process that reads and deserializes it with rosbags
+(process start and imports included, as for the command): targets at most 1.5 warm and 1.8 cold;
+the accelerations of the long run are checked against the exact ones.
+
+Usage: python bench/bench_bag.py [--seconds 60] [--repeats 3] [--long]
 """
 
 from __future__ import annotations
@@ -65,6 +70,78 @@ def rosbags_alone(path: Path) -> float:
     return time.perf_counter() - start
 
 
+PEER_SCRIPT = """
+import sys
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_typestore
+store = get_typestore(Stores.ROS2_JAZZY)
+with Reader(sys.argv[1]) as reader:
+    for connection, _, raw in reader.messages():
+        store.deserialize_cdr(raw, connection.msgtype)
+"""
+
+
+def rosbags_process(path: Path) -> float:
+    """The peer of the long run: a whole Python process reading and deserializing every message."""
+    start = time.perf_counter()
+    subprocess.run([sys.executable, "-c", PEER_SCRIPT, str(path)], check=True, capture_output=True)
+    return time.perf_counter() - start
+
+
+def check_accelerations(recording: Path, output: Path, seconds: float) -> float:
+    """The largest error of the link accelerations written, relative to the largest exact one, on the
+    last tenth of the run (the recording's joint motion is known in closed form)."""
+    from neforward_ros import forward_recursion
+    from neforward_ros.interface.topics import LINK_STATES
+
+    model = load_model(URDF)
+    store = typestore()
+    stamps, accels = [], []
+    with Reader(output) as reader:
+        connections = [c for c in reader.connections if c.topic.endswith(LINK_STATES.lstrip("~"))]
+        for connection, _, raw in reader.messages(connections=connections):
+            message = store.deserialize_cdr(raw, connection.msgtype)
+            t = message.header.stamp.sec + message.header.stamp.nanosec * 1e-9
+            if t < 1_700_000_000 + 0.9 * seconds:
+                continue
+            stamps.append(t - 1_700_000_000)
+            accels.append([[a.linear.x, a.linear.y, a.linear.z] for a in message.points[0].accelerations])
+    t = np.asarray(stamps)
+    w = np.linspace(1.0, 4.0, len(model.joint_names))
+    q = 0.4 * np.sin(np.outer(t, w))
+    qd = 0.4 * np.cos(np.outer(t, w)) * w
+    qdd = -0.4 * np.sin(np.outer(t, w)) * w**2
+    for column in (q, qd, qdd):
+        column[:, -1] *= 0.05
+    exact_in_root = forward_recursion(model, q, qd, qdd).in_root().accel
+    return float(np.abs(np.asarray(accels) - exact_in_root).max() / np.abs(exact_in_root).max())
+
+
+def long_run(folder: Path, repeats: int) -> None:
+    seconds = 600.0
+    count = make_recording(folder / "long", seconds)
+    neforward_command(folder / "long", folder / "long-out", folder / "cache")  # the URDF seen once
+    error = check_accelerations(folder / "long", folder / "long-out", seconds)
+    peer, warm, cold = [], [], []
+    for k in range(repeats):
+        os.sync()
+        peer.append(rosbags_process(folder / "long"))
+        os.sync()
+        warm.append(neforward_command(folder / "long", folder / "long-out", folder / "cache"))
+        os.sync()
+        cold.append(neforward_command(folder / "long", folder / "long-out", folder / f"empty-cache-long-{k}"))
+    a, b, c = (statistics.median(x) for x in (peer, warm, cold))
+    print(f"{count} joint states ({seconds:g} s at 500 Hz, 8 joints, positions only), median of {repeats}")
+    print(f"a whole Python process reading and deserializing it with rosbags: {a:.2f} s  (runs: "
+          f"{', '.join(f'{x:.2f}' for x in peer)})")  # fmt: skip
+    print(f"`neforward bag`, warm: {b:.2f} s, ratio {b / a:.2f} (target <= 1.5); runs: "
+          f"{', '.join(f'{x:.2f}' for x in warm)}")  # fmt: skip
+    print(f"`neforward bag`, cold: {c:.2f} s, ratio {c / a:.2f} (target <= 1.8); runs: "
+          f"{', '.join(f'{x:.2f}' for x in cold)}")  # fmt: skip
+    print(f"link accelerations on the last minute against the exact ones: largest error {100 * error:.2g} % of "
+          "the largest acceleration")
+
+
 def neforward_bag(path: Path, output: Path) -> float:
     shutil.rmtree(output, ignore_errors=True)
     start = time.perf_counter()
@@ -103,9 +180,13 @@ def main() -> None:
         help="where the recordings go (default: /dev/shm, a tmpfs, when there is one: the comparison is of "
         "computing, and the peer writes nothing; give a folder on disk to include the disk's speed)",
     )
+    parser.add_argument("--long", action="store_true", help="the 10-minute recording against a whole rosbags process")
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="neforward-bench-bag-", dir=args.dir))
     try:
+        if args.long:
+            long_run(folder, args.repeats)
+            return
         count = make_recording(folder / "in", args.seconds)
         neforward_command(folder / "in", folder / "out", folder / "cache")  # the warm cache: seen the URDF once
         peer, ours, command, first = [], [], [], []
