@@ -57,11 +57,14 @@ def robot_description(path: str, xacro_args: str = "") -> str:
 
 def _uses_xacro(text: str) -> bool:
     from neforward_ros.errors import ModelError
-    from neforward_ros.model.xacro import xacro_use
-    from neforward_ros.model.xml_tree import parse_xml
 
     try:
-        return xacro_use(parse_xml(text)).needed is not None
+        from neforward_ros.model.document import parse_document
+        from neforward_ros.model.xacro import xacro_use
+
+        return xacro_use(parse_document(text)).needed is not None
+    except ImportError:  # ros2 launch runs on the system's Python, which may lack lxml (a pip dependency)
+        return any(mark in text for mark in ("<xacro:", "${", "$("))
     except ModelError:  # not XML: the node says what is wrong with it
         return False
 
