@@ -80,7 +80,10 @@ class Client(Node):
         """Until the node subscribes to what we publish and publishes what we record."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            if self.publisher.get_subscription_count() and all(s.get_publisher_count() for s in self.recorders):
+            clock_matched = self.clock is None or self.clock.get_subscription_count()  # sim time: the node's /clock
+            if self.publisher.get_subscription_count() and clock_matched and all(
+                s.get_publisher_count() for s in self.recorders
+            ):
                 self.spin_for(0.5)  # the other side of the match
                 return True
             rclpy.spin_once(self, timeout_sec=0.05)
