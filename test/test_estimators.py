@@ -203,7 +203,9 @@ def test_the_no_spike_test_fails_with_the_old_readiness_rule(monkeypatch, name: 
     nearest samples and its degree lowered when its window is short) must fail the no-spike test."""
     from neforward_ros.estimation import fit, stream
 
-    def old_rule(stamps: np.ndarray, target: int, support: Support, holes=None, end_slack=None) -> str | None:
+    def old_rule(
+        stamps: np.ndarray, target: int, support: Support, holes=None, end_slack=None, repeats=()
+    ) -> str | None:
         return None if np.count_nonzero(stamps <= target) >= 3 else "fewer than 3 samples"
 
     monkeypatch.setattr(stream, "uncovered", old_rule)

@@ -49,7 +49,8 @@ FLAGS = [
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory) -> Path:
     """3 s of trotting: joint states at 500 Hz (jittered stamps, positions, velocities and efforts
-    that swing over and under the contact thresholds) and the IMU at 400 Hz, in stamp order."""
+    that swing over and under the contact thresholds; some messages repeat the one before under a new
+    stamp) and the IMU at 400 Hz, in stamp order."""
     path = tmp_path_factory.mktemp("agree") / "trot"
     model = load_model(URDF)
     names = list(model.joint_names)
@@ -58,6 +59,9 @@ def recording(tmp_path_factory) -> Path:
     t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
     q, qd, _ = legs(t, model.joint_names)
     efforts = 8.0 * np.sin(2 * np.pi * 0.7 * t[:, None] + np.arange(len(names))) + rng.normal(0, 0.05, q.shape)
+    for first in range(40, count - 10, 41):  # a driver's repeated readings, runs of 1 to 3, under new stamps
+        for i in range(first, first + 1 + first % 3):
+            q[i], qd[i], efforts[i] = q[i - 1], qd[i - 1], efforts[i - 1]
     t_imu = np.arange(1200) / 400.0 + 0.0011
     kin = forward_recursion(model, *legs(t_imu, model.joint_names), base=trunk_motion(t_imu))
     k = model.link_index["imu_link"]

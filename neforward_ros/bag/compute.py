@@ -29,6 +29,7 @@ from neforward_ros.computation.raw_samples import RawAssembler
 from neforward_ros.computation.result import Observation, Result
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.coverage import covered_mask
+from neforward_ros.estimation.repeats import repeated
 from neforward_ros.model import RobotModel
 from neforward_ros.stamps import NS
 
@@ -213,8 +214,8 @@ def _whole(
     for j, (rows, qs, vs, es) in recording.columns.items():
         inside = (rows >= start) & (rows < stop) & np.isfinite(qs)
         t_ns, keep = np.unique(recording.stamps[rows[inside]], return_index=True)
-        efforts[:, j] = _efforts_at(t_ns, es[inside][keep], targets)
         if len(t_ns) < support.min_samples:
+            efforts[:, j] = _efforts_at(t_ns, es[inside][keep], targets)
             absent.append(model.joint_names[j])
             continue
         q = qs[inside][keep]
@@ -222,16 +223,25 @@ def _whole(
             q = np.unwrap(q)
         v = vs[inside][keep]
         use_velocity = settings.estimator.velocity_source != "differentiate" and bool(np.all(np.isfinite(v)))
-        groups.setdefault((t_ns.tobytes(), use_velocity), []).append((j, q, v))
+        groups.setdefault((t_ns.tobytes(), use_velocity), []).append((j, q, v, es[inside][keep]))
     absent += [model.joint_names[j] for j in range(n) if j not in recording.columns]
     for (t_bytes, use_velocity), members in groups.items():
-        t = (np.frombuffer(t_bytes, dtype=np.int64) - origin) / NS
-        joints = [j for j, _, _ in members]
+        t_ns = np.frombuffer(t_bytes, dtype=np.int64)
+        reach = (t_ns - origin) / NS  # every sample's time, repeated readings too: how far the samples go
+        joints = [j for j, _, _, _ in members]
+        q = np.stack([q for _, q, _, _ in members], axis=1)
+        v = np.stack([v for _, _, v, _ in members], axis=1)
+        gap = np.r_[False, np.diff(t_ns) > settings.estimator.max_gap * NS]  # where the node restarts
+        fresh = ~repeated(q, gap)  # a driver's repeated reading is no sample: the node leaves it out too
+        t_ns, q, v = t_ns[fresh], q[fresh], v[fresh]
+        for j, _, _, e in members:
+            efforts[:, j] = _efforts_at(t_ns, e[fresh], targets)
+        t = (t_ns - origin) / NS
         q_at, qd_at, qdd_at, std_at = estimate_at(
             t,
-            np.stack([q for _, q, _ in members], axis=1),
+            q,
             target_s,
-            velocity=np.stack([v for _, _, v in members], axis=1) if use_velocity else None,
+            velocity=v if use_velocity else None,
             method=batch.method,
             window=batch.window,
             order=batch.order,
@@ -240,7 +250,7 @@ def _whole(
         )
         stale = _gap_to_samples(t, target_s) > settings.estimator.max_gap
         silent[:, joints] = stale[:, None]
-        unready = stale | ~covered_mask(t, target_s, support, _end_slack(t)) | ~reached
+        unready = stale | ~covered_mask(t, target_s, support, _end_slack(reach), reach) | ~reached
         for column, values in enumerate((q_at, qd_at, qdd_at)):
             values[unready] = np.nan
             state[column][:, joints] = values

@@ -50,6 +50,9 @@ RATIO = math.sqrt(2.0)
 """Between consecutive half-widths of the ladder."""
 LEVELS = 10
 """Half-widths tried at most."""
+GROWTH = 4.0
+"""The most a coloured noise's sixth differences grow from one stride to twice it (a smooth motion's
+grow 64-fold): see :func:`noise_of`."""
 FLOOR = 1e-9
 """The least noise, relative to the position: a still joint's samples, all alike, give fits that differ
 only by rounding, which must not break the intervals."""
@@ -73,19 +76,56 @@ def _ladder_and_leads(h_max: float, lead: float) -> tuple[np.ndarray, np.ndarray
     return half_widths, np.ascontiguousarray(np.minimum(float(lead), half_widths))
 
 
-def noise_of(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(white-noise sigma, quantisation step) per column of consecutive samples (k, n); zeros when
-    there are too few samples to tell."""
+def noise_of(values: np.ndarray, coloured: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(noise sigma, quantisation step) per column of consecutive samples (k, n); zeros when there
+    are too few samples to tell.
+
+    The noise is read from the mean absolute sixth difference of consecutive samples, and, with
+    ``coloured``, also of samples 2, 4, 8 ... apart while at least 8 such differences fit: a real
+    arm's logged positions carry several times more noise at 15-100 Hz than at the sampling rate's
+    Nyquist frequency (the Panda's, about 5x), which consecutive samples do not see, and which the
+    larger windows' fits do. A stride's figure is taken (the largest of them) while it grows at most
+    :data:`GROWTH` times from the stride before, at every stride up to it and at the next one: a smooth
+    motion's sixth differences grow 64-fold per doubling, and where the motion shows, the strides stop
+    (the next stride's check keeps the motion's share of a stride taken under GROWTH / 64)."""
     n = values.shape[1]
     if len(values) < 8:
         return np.zeros(n), np.zeros(n)
     first = values[1:] - values[:-1]
     sixth = np.diff(first, 5, axis=0)
     white = np.add.reduce(np.abs(sixth), axis=0) * (1.0 / (len(sixth) * _SIXTH))
+    if coloured:
+        white = _coloured(values, np.array([0]), np.array([len(values)]), white[None])[0]
     steps = np.abs(first)
     steps[steps == 0.0] = np.inf
     step = np.minimum.reduce(steps, axis=0)
     return white, np.where(np.isfinite(step), step, 0.0)
+
+
+_BINOMIAL = (1.0, -6.0, 15.0, -20.0, 15.0, -6.0, 1.0)
+
+
+def _coloured(y: np.ndarray, lo: np.ndarray, hi: np.ndarray, white: np.ndarray) -> np.ndarray:
+    """The noise of :func:`noise_of` with strides 2, 4, 8 ..., for the windows [lo, hi) of y (T, n)
+    whose stride-1 noise is ``white`` (M, n)."""
+    best = white.copy()
+    previous = white
+    alive = np.ones(white.shape, dtype=bool)
+    s = 2
+    while 6 * s + 8 <= int(np.max(hi - lo, initial=0)):
+        count = len(y) - 6 * s
+        sixth = _BINOMIAL[0] * y[:count]
+        for k in range(1, 7):
+            sixth = sixth + _BINOMIAL[k] * y[k * s : k * s + count]
+        total = np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(np.abs(sixth), axis=0)])
+        last = np.clip(hi - 6 * s, 0, count)  # differences wholly inside: [lo, hi - 6 s)
+        number = np.maximum(last - lo, 0)
+        noise = (total[last] - total[np.minimum(lo, last)]) / (np.maximum(number, 1)[:, None] * _SIXTH)
+        alive = alive & (number >= 8)[:, None] & (noise <= GROWTH * previous)
+        best = np.where(alive & (previous > best), previous, best)  # a stride counts once the next one agrees
+        previous = noise
+        s *= 2
+    return best
 
 
 def select(
@@ -133,6 +173,7 @@ def _window_noise(y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.nda
     white = np.where(number[:, None] > 0, (total[last] - total[np.minimum(lo, last)]) / np.maximum(number, 1)[:, None],
                      0.0) / _SIXTH  # fmt: skip
     white[hi - lo < 8] = 0.0
+    white = _coloured(y, lo, hi, white)
     steps = np.abs(np.diff(y, axis=0))
     steps = np.where(steps > 0.0, steps, np.inf)
     pairs = np.stack([lo, np.maximum(hi - 1, lo + 1)], axis=1).reshape(-1)
@@ -164,7 +205,7 @@ def adaptive_fits(
     library = native_fit.FIT.get(wait=len(targets) >= native_fit.WORTH_WAITING)
     columns = np.full(y.shape[1], derivative)
     got = None if library is None else native_fit.fits(library, t, y, targets, *_ladder_and_leads(h_max, lead), order,
-                                                       columns, GAMMA, ROUGHNESS, _SIXTH, FLOOR)  # fmt: skip
+                                                       columns, GAMMA, ROUGHNESS, _SIXTH, FLOOR, GROWTH)  # fmt: skip
     if got is None:
         return python_adaptive_fits(t, y, targets, h_max, order, lead, derivative)
     out, done = got
@@ -255,7 +296,7 @@ def adaptive_fit(
     if library is not None:
         got = native_fit.fit(
             library, times, values, target, *_ladder_and_leads(h_max, lead), order, derivative, GAMMA, ROUGHNESS,
-            _SIXTH, FLOOR,
+            _SIXTH, FLOOR, GROWTH,
         )  # fmt: skip
         if got is not None:
             return got

@@ -56,20 +56,27 @@ def uncovered(
     support: Support,
     holes: Sequence[int] | None = None,
     end_slack: int | None = None,
+    repeats: Sequence[int] = (),
 ) -> str | None:
     """Why the samples (stamps, int ns, increasing) do not cover the target's support; None if they do.
 
     ``holes``: optionally, the increasing stamps of the samples that come more than max_hole after the
     one before them (a streaming caller keeps these as samples arrive, and the check costs no pass
     over the samples). ``end_slack``: ns; the last sample's greatest distance from the end (max_hole
-    if None)."""
+    if None). ``repeats``: increasing stamps of repeated readings left out of the fits
+    (:mod:`.repeats`): they show the joint's samples go on, and count as samples for the end only."""
     before, after, hole = support.ns()
     start, end = target - before, target + after
     first = int(stamps.searchsorted(start, side="right")) - 1  # the newest sample at or before start
     if first < 0:
         return "too little history"
     last = int(stamps.searchsorted(end, side="right")) - 1  # the newest at or before end
-    if end - int(stamps[last]) > (hole if end_slack is None else min(end_slack, hole)):
+    reached = int(stamps[last])
+    if repeats:
+        k = bisect.bisect_right(repeats, end)
+        if k and repeats[k - 1] > reached:
+            reached = repeats[k - 1]
+    if end - reached > (hole if end_slack is None else min(end_slack, hole)):
         return "too few samples after the stamp yet"
     if last > first:
         if holes is None:
@@ -85,17 +92,24 @@ def uncovered(
 
 
 def covered_mask(
-    times: np.ndarray, targets: np.ndarray, support: Support, end_slack: float | None = None
+    times: np.ndarray,
+    targets: np.ndarray,
+    support: Support,
+    end_slack: float | None = None,
+    reach: np.ndarray | None = None,
 ) -> np.ndarray:
     """:func:`uncovered` is None, for many targets at once; times, targets and end_slack in s, times
-    increasing."""
+    increasing. ``reach``: the samples' times with the repeated readings left out of them (increasing;
+    None: ``times``), for the end's check."""
     if len(times) == 0:
         return np.zeros(len(targets), dtype=bool)
     start, end = targets - support.before, targets + support.after
     first = np.searchsorted(times, start, side="right") - 1
     last = np.searchsorted(times, end, side="right") - 1
     slack = support.max_hole if end_slack is None else min(end_slack, support.max_hole)
-    ok = (first >= 0) & (end - times[np.maximum(last, 0)] <= slack)
+    reach = times if reach is None else reach
+    reached = reach[np.maximum(np.searchsorted(reach, end, side="right") - 1, 0)]
+    ok = (first >= 0) & (end - reached <= slack)
     ok &= last - np.searchsorted(times, start, side="left") + 1 >= support.min_samples
     # Long intervals (i, i + 1) with first <= i < last: a running count answers for each target.
     long = np.r_[0, np.cumsum(np.diff(times) > support.max_hole)]  # long intervals before sample i

@@ -7,6 +7,7 @@ from collections import deque
 import numpy as np
 
 from neforward_ros.estimation.kalman_bank import KalmanBank
+from neforward_ros.estimation.repeats import MOST_REPEATS, MOVING_STEPS, moving
 from neforward_ros.stamps import NS
 
 
@@ -31,7 +32,10 @@ class JointHistory:
         "intervals",
         "joints",
         "last_without_velocity",
+        "left_out",
+        "newest_received",
         "origin",
+        "repeated",
         "slots",
         "start",
         "track",
@@ -55,6 +59,9 @@ class JointHistory:
         self.start = 0
         self.end = 0
         self.last_without_velocity = -1  # buffer index of the newest sample that had no velocity at all
+        self.repeated = 0  # samples left out as repeats since the newest one kept
+        self.left_out: deque[int] = deque(maxlen=64)  # the stamps of the latest ones
+        self.newest_received = 0  # the stamp of the newest sample, kept or left out
 
     def __len__(self) -> int:
         return self.end - self.start
@@ -99,6 +106,22 @@ class JointHistory:
     def newest_position(self, joint: int) -> float:
         return float(self._positions[self.end - 1, self.slots[joint]])
 
+    def repeats(self, stamp_ns: int, positions: list[float]) -> bool:
+        """Whether a sample of these positions (in the order of :attr:`joints`) at this stamp repeats the
+        newest one (:mod:`neforward_ros.estimation.repeats`); counted when it does."""
+        if len(self) < MOVING_STEPS + 1 or self.repeated >= MOST_REPEATS or stamp_ns <= self.newest_stamp:
+            return False
+        newest = self._positions[self.end - 1]
+        if any(p != newest[k] for k, p in enumerate(positions)):
+            return False
+        if not moving(self._positions[self.end - MOVING_STEPS - 1 : self.end]):
+            return False
+        self.repeated += 1
+        self.intervals.append(stamp_ns - self.newest_received)
+        self.newest_received = stamp_ns
+        self.left_out.append(stamp_ns)
+        return True
+
     def append(
         self, stamp_ns: int, positions: list[float], velocities: list[float], efforts: list[float], max_hole_ns: int
     ) -> None:
@@ -120,7 +143,7 @@ class JointHistory:
             if interval > max_hole_ns:
                 self.holes.append(stamp_ns)
             else:
-                self.intervals.append(interval)
+                self.intervals.append(stamp_ns - max(self.newest_received, int(self._stamps[end - 1])))
         self._stamps[end] = stamp_ns
         self._seconds[end] = (stamp_ns - self.origin) / NS
         self._positions[end] = positions
@@ -131,6 +154,8 @@ class JointHistory:
         if all(v != v for v in velocities):  # all NaN
             self.last_without_velocity = end
         self.end = end + 1
+        self.repeated = 0
+        self.newest_received = stamp_ns
         if self.track is not None:
             self.track.add(stamp_ns, self._positions[end], self._velocities[end])
 
@@ -157,6 +182,8 @@ class JointHistory:
         moved.end = count
         moved.holes = list(self.holes)
         moved.intervals = self.intervals.copy()
+        moved.left_out = self.left_out.copy()
+        moved.newest_received = self.newest_received
         # -1 claims nothing: the velocities of its first windows are checked sample by sample
         moved.last_without_velocity = -1
         self.remove(joints)

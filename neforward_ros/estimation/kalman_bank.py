@@ -173,7 +173,7 @@ class KalmanBank:
                 return known
             if len(samples) < 32:
                 return fallback**2
-        white, step = noise_of(np.stack(samples))
+        white, step = noise_of(np.stack(samples), coloured=False)
         seen = self._steps.get(kind)
         step = np.where(step > 0.0, step, np.inf)
         seen = step if seen is None else np.minimum(seen, step)

@@ -97,7 +97,7 @@ static int spd_inverse(const double *a, long d, double *inv) {
 int adaptive_fit(long count, const double *times, const double *values, long n, double target,
                  long nlevels, const double *levels, const double *leads, long order,
                  const long *derivative, double gamma, double roughness, double sixth_gain,
-                 double floor_, double *out) {
+                 double floor_, double growth, double *out) {
     long d = order + 1, lo[64], hi[64], valid = 0;
     if (nlevels > 64 || d > 16 || n < 1) return 1;
     for (long l = 0; l < nlevels; l++) {
@@ -107,7 +107,7 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
     }
     if (valid == 0) return 1;
     long width = hi[0] - lo[0];
-    double *scratch = malloc(sizeof(double) * ((size_t)width * n + d * n + 5 * (size_t)valid * n + 3 * n));
+    double *scratch = malloc(sizeof(double) * ((size_t)width * n + d * n + 5 * (size_t)valid * n + 6 * n));
     if (scratch == NULL) return 2;
     double *diffs = scratch, *moments = diffs + (size_t)width * n, *fits = moments + d * n;
     double *white = fits + 5 * (size_t)valid * n, *step = white + n, *spread = step + n;
@@ -132,6 +132,27 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
                 for (long j = 0; j < n; j++) diffs[i * n + j] = diffs[(i + 1) * n + j] - diffs[i * n + j];
         for (long i = 0; i < width - 6; i++) for (long j = 0; j < n; j++) white[j] += fabs(diffs[i * n + j]);
         for (long j = 0; j < n; j++) white[j] *= 1.0 / ((double)(width - 6) * sixth_gain);
+        /* coloured noise: the sixth differences of samples s = 2, 4, 8 ... apart, while they grow at
+           most `growth` times per doubling; a stride's counts once the next one agrees (see noise_of) */
+        double *previous = spread + n, *candidate = previous + n, *alive = candidate + n;
+        for (long j = 0; j < n; j++) { previous[j] = white[j]; alive[j] = 1.0; }
+        for (long s = 2; 6 * s + 8 <= width; s *= 2) {
+            long terms = width - 6 * s;
+            for (long j = 0; j < n; j++) candidate[j] = 0.0;
+            for (long i = 0; i < terms; i++)
+                for (long j = 0; j < n; j++) {
+                    const double *y = window + i * n + j;
+                    double x = y[0] + -6.0 * y[s * n] + 15.0 * y[2 * s * n] + -20.0 * y[3 * s * n]
+                               + 15.0 * y[4 * s * n] + -6.0 * y[5 * s * n] + y[6 * s * n];
+                    candidate[j] += fabs(x);
+                }
+            for (long j = 0; j < n; j++) {
+                double noise = candidate[j] / ((double)terms * sixth_gain);
+                alive[j] = alive[j] > 0.0 && noise <= growth * previous[j] ? 1.0 : 0.0;
+                if (alive[j] > 0.0 && previous[j] > white[j]) white[j] = previous[j];  /* confirmed by s */
+                previous[j] = noise;
+            }
+        }
     }
     for (long j = 0; j < n; j++) if (isinf(step[j]) || width < 8) step[j] = 0.0;
     /* every valid level's fit, the sums gathered ring by ring from the smallest window outwards */
@@ -214,10 +235,10 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
 void adaptive_fits(long count, const double *times, const double *values, long n, long ntargets,
                    const double *targets, long nlevels, const double *levels, const double *leads,
                    long order, const long *derivative, double gamma, double roughness,
-                   double sixth_gain, double floor_, double *out, int *status) {
+                   double sixth_gain, double floor_, double growth, double *out, int *status) {
     for (long m = 0; m < ntargets; m++)
         status[m] = adaptive_fit(count, times, values, n, targets[m], nlevels, levels, leads, order,
-                                 derivative, gamma, roughness, sixth_gain, floor_, out + m * 5 * n);
+                                 derivative, gamma, roughness, sixth_gain, floor_, growth, out + m * 5 * n);
 }
 """
 
@@ -280,10 +301,10 @@ class NativeAdaptiveFit:
 def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
     double, pointer, long = ctypes.c_double, ctypes.c_void_p, ctypes.c_long
     library.adaptive_fit.argtypes = [long, pointer, pointer, long, double, long, pointer, pointer, long, pointer,
-                                     double, double, double, double, pointer]  # fmt: skip
+                                     double, double, double, double, double, pointer]  # fmt: skip
     library.adaptive_fit.restype = ctypes.c_int
     library.adaptive_fits.argtypes = [long, pointer, pointer, long, long, pointer, long, pointer, pointer, long,
-                                      pointer, double, double, double, double, pointer, pointer]  # fmt: skip
+                                      pointer, double, double, double, double, double, pointer, pointer]  # fmt: skip
     library.adaptive_fits.restype = None
     return library
 
@@ -305,11 +326,12 @@ def fit(
     roughness: float,
     sixth_gain: float,
     floor: float,
+    growth: float,
 ) -> tuple[np.ndarray, ...] | None:
     """The C function's value, first and second derivative, standard deviation and strain (n,) each;
     None where the Python function must serve (too few samples, an order above MAX_ORDER)."""
     got = fits(library, times, values, np.array([target], dtype=float), half_widths, leads, order, derivative,
-               gamma, roughness, sixth_gain, floor)  # fmt: skip
+               gamma, roughness, sixth_gain, floor, growth)  # fmt: skip
     if got is None or not got[1][0]:
         return None
     out = got[0][0]
@@ -329,6 +351,7 @@ def fits(
     roughness: float,
     sixth_gain: float,
     floor: float,
+    growth: float,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The C function at every target over the whole of ``times, values``: value, first and second
     derivative, standard deviation and strain (M, 5, n), and whether each target was done (M,)
@@ -350,7 +373,7 @@ def fits(
         library.adaptive_fits(len(times), times.ctypes.data, values.ctypes.data, n, count,
                               targets[part].ctypes.data, len(half_widths), half_widths.ctypes.data,
                               leads.ctypes.data, order, derivative.ctypes.data, gamma, roughness, sixth_gain, floor,
-                              out[part].ctypes.data, status[part].ctypes.data)  # fmt: skip
+                              growth, out[part].ctypes.data, status[part].ctypes.data)  # fmt: skip
 
     # Each target is fitted on its own (the C function keeps nothing from one to the next), and a
     # ctypes call releases the GIL: a whole recording's targets are shared among the cores.

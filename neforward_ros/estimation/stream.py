@@ -42,6 +42,8 @@ STRAIN_LIMIT = 0.5
 INNOVATION_LIMIT = 5.0
 """kalman: how far the normalised innovations may average from 1 (above or below) before it is said."""
 
+_REPEATS = "repeats"
+
 __all__ = ["RESTART", "JointEstimate", "StreamSettings", "StreamingEstimator"]
 
 
@@ -212,7 +214,8 @@ class StreamingEstimator:
             new_target = True
         else:
             new_target = stamp > self._clock
-        if not self._add(stamp, samples):
+        added = self._add(stamp, samples)
+        if not added:
             return []
         if not new_target:
             return []
@@ -220,6 +223,8 @@ class StreamingEstimator:
             self._intervals.append(stamp - self._clock)
         self._clock = stamp
         self._pending.append(stamp)
+        if added is _REPEATS:
+            return []  # a repeated reading is a target, and tells nothing new about the ones before it
         out = [self._estimate(target) for target in self._drain(stamp - self._lag_ns + self._tolerance())]
         self._targets += 1
         if self._targets % 32 == 0:  # forget old samples now and then
@@ -227,8 +232,9 @@ class StreamingEstimator:
                 group.drop_before(stamp - self._keep_ns, self.settings.order + 2)
         return out
 
-    def _add(self, stamp: int, samples: list[tuple[int, float, float, float]]) -> bool:
-        """Append one message's samples to their groups; returns whether any was added.
+    def _add(self, stamp: int, samples: list[tuple[int, float, float, float]]) -> bool | str:
+        """Append one message's samples to their groups; returns whether any was added (:data:`_REPEATS`
+        when the message's samples were all repeated readings, left out of the fits).
 
         A repeated stamp is skipped. A joint whose previous sample is newer, or more than max_gap
         older, restarts its history. Joints of a group that arrive without the rest of it move,
@@ -262,12 +268,16 @@ class StreamingEstimator:
                 restarted.append(f"{self.joint_names[j]!r} ({reason})")
                 self._forget(group, [j])
             fresh[j] = (position, velocity, effort)
+        repeats = 0
         if restarted:
             self._log.every("restart", logging.WARNING, f"history restarted for joint {', '.join(restarted)}")
         for group, values in by_group.values():
             if len(values) < len(group.joints):
                 group = self._split(group, [j for j in group.joints if j in values])
             columns = [values[j] for j in group.joints]
+            if group.repeats(stamp, [position for position, _, _ in columns]):
+                repeats += 1  # a driver's repeated reading (:mod:`.repeats`): no sample; its stamp is a target
+                continue
             group.append(stamp, *(list(x) for x in zip(*columns, strict=True)), self._hole_ns)
             self._watch_innovations(group)
         if fresh:
@@ -288,6 +298,8 @@ class StreamingEstimator:
                 self._group_of[j] = group
             columns = [fresh[j] for j in group.joints]
             group.append(stamp, *(list(x) for x in zip(*columns, strict=True)), self._hole_ns)
+        if repeats and repeats == len(by_group) and not fresh:
+            return _REPEATS
         return bool(by_group or fresh)
 
     def _forget(self, group: JointHistory, joints: list[int]) -> None:
@@ -348,7 +360,7 @@ class StreamingEstimator:
             return  # stale: not ready
         if group.any_effort:
             state[members, 3] = group.effort_at(k, target)
-        reason = uncovered(stamps, target, self._support, group.holes, group.end_slack())
+        reason = uncovered(stamps, target, self._support, group.holes, group.end_slack(), group.left_out)
         if reason is not None:
             self._say_why(group, reason)
             return

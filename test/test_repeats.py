@@ -1,0 +1,115 @@
+"""A driver's repeated readings (the same positions under a new stamp) are left out of the fits,
+by the same rule in the node and the bag tool; real stops and slow quantised joints are not.
+
+Oracle: the closed-form derivatives of the signals; the repeats' own rule is checked on cases built
+by hand (a still joint, a quantised slow ramp, a moving arm)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from neforward_ros.estimation.batch import estimate_at
+from neforward_ros.estimation.repeats import MOST_REPEATS, repeated
+from neforward_ros.estimation.settings import StreamSettings
+from neforward_ros.estimation.stream import StreamingEstimator
+
+NAMES = ["a", "b", "c"]
+
+
+def motion(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and accelerations of three joints (sums of sines, up to 2 Hz)."""
+    f = np.array([[0.4, 1.1, 2.0]])
+    amplitude = np.array([[0.8, 0.5, 0.3]])
+    phase = 2 * np.pi * f * t[:, None]
+    return (amplitude * np.sin(phase)).sum(axis=1, keepdims=True) * np.array([[1.0, -0.7, 0.5]]), (
+        -(amplitude * (2 * np.pi * f) ** 2 * np.sin(phase)).sum(axis=1, keepdims=True) * np.array([[1.0, -0.7, 0.5]])
+    )
+
+
+def with_repeats(q: np.ndarray, rng: np.random.Generator, share: float = 0.06) -> np.ndarray:
+    """q with runs of 1 to 4 samples that repeat the reading before them (about ``share`` of them)."""
+    out = q.copy()
+    k = 10
+    while k < len(q) - 10:
+        k += int(rng.geometric(share * 0.5))
+        for i in range(k, min(k + int(rng.integers(1, 5)), len(q))):
+            out[i] = out[i - 1]
+        k += 5
+    return out
+
+
+def stream(t: np.ndarray, q: np.ndarray, settings: StreamSettings) -> tuple[np.ndarray, np.ndarray]:
+    estimator = StreamingEstimator(NAMES, settings=settings)
+    stamps = 10**18 + np.round(t * 1e9).astype(np.int64)
+    got = {}
+    for k in range(len(t)):
+        for estimate in estimator.update(int(stamps[k]), NAMES, q[k].tolist()):
+            got[estimate.stamp_ns] = estimate.accelerations
+    keys = np.array(sorted(got))
+    return np.searchsorted(stamps, keys), np.array([got[s] for s in keys])
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("rate", [250.0, 1000.0])
+def test_repeated_readings_do_not_read_as_noise(seed: int, rate: float) -> None:
+    rng = np.random.default_rng(seed)
+    count = int(6 * rate)
+    t = (np.arange(count) + rng.uniform(-0.05, 0.05, count)) / rate
+    q, qdd = motion(t)
+    q = np.round(q / 1e-6) * 1e-6  # a fine encoder
+    repeats = with_repeats(q, rng)
+    assert 0.03 < np.mean(np.all(repeats[1:] == repeats[:-1], axis=1)) < 0.12
+    scale = np.sqrt(np.mean(qdd**2, axis=0))
+    errors = {}
+    for name, positions in (("clean", q), ("repeats", repeats)):
+        rows, estimates = stream(t, positions, StreamSettings())
+        inner = (t[rows] > 0.5) & (t[rows] < t[-1] - 0.5)
+        assert np.count_nonzero(inner) > 0.75 * count  # every stamp, repeated or not, has its estimate
+        errors[name] = np.sqrt(np.mean((estimates[inner] - qdd[rows][inner]) ** 2, axis=0)) / scale
+    assert np.all(errors["repeats"] <= 1.5 * errors["clean"] + 2e-3), errors
+
+
+def test_node_and_whole_recording_leave_out_the_same_samples() -> None:
+    rng = np.random.default_rng(7)
+    t = (np.arange(3000) + rng.uniform(-0.05, 0.05, 3000)) / 1000.0
+    q, _ = motion(t)
+    q = with_repeats(q, rng)
+    rows, streamed = stream(t, q, StreamSettings(adaptive=False))
+    fresh = ~repeated(q)
+    assert 0.03 < np.mean(~fresh) < 0.12
+    _, _, whole = estimate_at(t[fresh], q[fresh], t[rows], adaptive=False)
+    inner = (t[rows] > 0.3) & (t[rows] < t[-1] - 0.3)
+    np.testing.assert_allclose(streamed[inner], whole[inner], rtol=0, atol=1e-8 * np.abs(whole).max())
+
+
+def test_still_joints_slow_quantised_ramps_and_long_stops_are_not_repeats() -> None:
+    count = 2000
+    still = np.tile([0.3, -1.2], (count, 1))
+    assert not repeated(still).any()
+    t = np.arange(count) / 1000.0
+    ramp = np.round(0.3 * t / 1e-3) * 1e-3  # 0.3 steps a sample: most samples equal the one before
+    assert not repeated(ramp[:, None]).any()
+    moving_then_stop = np.r_[np.sin(t[:500]), np.full(500, np.sin(t[499]))][:, None]
+    left_out = repeated(moving_then_stop)
+    assert np.count_nonzero(left_out) == MOST_REPEATS and left_out[500 : 500 + MOST_REPEATS].all()
+
+
+def test_a_real_stop_reads_as_a_stop() -> None:
+    rate = 500.0
+    t = np.arange(int(3 * rate)) / rate
+    s = np.clip(t / 1.0, 0.0, 1.0)
+    q = (0.5 * (10 * s**3 - 15 * s**4 + 6 * s**5))[:, None] * np.ones((1, 3))  # a minimum-jerk move, then still
+    rows, estimates = stream(t, q, StreamSettings())
+    settled = t[rows] > 1.4
+    assert settled.any() and np.abs(estimates[settled]).max() < 1e-3
+
+
+def test_the_accuracy_test_fails_when_repeats_are_fitted(monkeypatch) -> None:
+    """A planted bug, kept as a test: with every repeated reading fitted as a sample, the accuracy
+    test above must fail."""
+    from neforward_ros.estimation.history import JointHistory
+
+    monkeypatch.setattr(JointHistory, "repeats", lambda self, stamp_ns, positions: False)
+    with pytest.raises(AssertionError):
+        test_repeated_readings_do_not_read_as_noise(1, 1000.0)
