@@ -107,9 +107,9 @@ class JointHistory:
         return float(self._positions[self.end - 1, self.slots[joint]])
 
     def repeats(self, stamp_ns: int, positions: list[float]) -> bool:
-        """Whether a sample of these positions (in the order of :attr:`joints`) at this stamp repeats the
-        newest one (:mod:`neforward_ros.estimation.repeats`); counted when it does."""
-        if len(self) < MOVING_STEPS + 1 or self.repeated >= MOST_REPEATS or stamp_ns <= self.newest_stamp:
+        """Whether a sample of these positions (in the order of :attr:`joints`) at this stamp, newer than
+        the newest, repeats it (:mod:`neforward_ros.estimation.repeats`); counted when it does."""
+        if len(self) < MOVING_STEPS + 1 or self.repeated >= MOST_REPEATS:
             return False
         newest = self._positions[self.end - 1]
         if any(p != newest[k] for k, p in enumerate(positions)):
@@ -143,7 +143,7 @@ class JointHistory:
             if interval > max_hole_ns:
                 self.holes.append(stamp_ns)
             else:
-                self.intervals.append(stamp_ns - max(self.newest_received, int(self._stamps[end - 1])))
+                self.intervals.append(stamp_ns - self.newest_received)  # from the last message, repeats too
         self._stamps[end] = stamp_ns
         self._seconds[end] = (stamp_ns - self.origin) / NS
         self._positions[end] = positions
