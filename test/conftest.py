@@ -123,6 +123,16 @@ def disk_cache_of_this_session(tmp_path_factory):
     os.environ["NEFORWARD_CACHE"] = str(tmp_path_factory.mktemp("disk_cache"))
 
 
+@pytest.fixture(autouse=True)
+def models_read_not_recalled(request, monkeypatch):
+    """In this process every test reads its URDFs (what a test of the reading checks); the disk cache
+    of built models is tested by test_model_cache.py, and used by the processes tests start."""
+    if "model_cache" not in request.keywords:
+        import neforward_ros.model.load as load
+
+        monkeypatch.setattr(load, "stored_model", lambda description, root_link: None)
+
+
 @pytest.fixture(params=sorted(TEST_ROBOTS))
 def robot_path(request) -> Path:
     return TEST_ROBOTS[request.param]

@@ -347,6 +347,84 @@ def test_batched_mcap_writing_equals_rosbags_message_by_message(tmp_path, monkey
     assert 990 <= len(window) <= 1010  # about 1 s of both topics at 500 Hz
 
 
+def test_batched_and_single_messages_in_the_same_chunks_read_back_in_order_through_every_index(tmp_path) -> None:
+    """The batched writing closes rosbags' chunks itself (message indexes from arrays): chunks that also
+    hold messages rosbags wrote one by one, before and after batches, read back whole, by file order
+    and through the chunk and message indexes."""
+    from neforward_ros.bag import write as bag_write
+
+    if not bag_write.fast_mcap_allowed():
+        pytest.skip("the installed rosbags is not one the fast MCAP path is made for: it is not used")
+    kind = "std_msgs/msg/Float64"
+    sent: dict[str, list[tuple[int, bytes]]] = {"/single": [], "/a": [], "/b": []}
+    with Writer(tmp_path / "mixed", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        single = writer.add_connection("/single", kind, typestore=typestore())
+        pair = [writer.add_connection(topic, kind, typestore=typestore()) for topic in ("/a", "/b")]
+        stamp = 10**18
+        for block in range(40):  # 40 x 3000 batched messages of 28 bytes: about 6 chunks
+            for _ in range(7):
+                data = cdr.encode(kind, {"data": float(stamp)})
+                writer.write(single, stamp, data)
+                sent["/single"].append((stamp, bytes(data)))
+                stamp += 1000
+            times = stamp + 1000 * np.arange(3000, dtype=np.int64)
+            streams = []
+            for connection in pair:
+                rows = np.stack(
+                    [np.frombuffer(cdr.encode(kind, {"data": float(t + connection.id)}), np.uint8) for t in times]
+                )
+                streams.append((connection, rows))
+                sent[connection.topic] += [(int(t), bytes(r)) for t, r in zip(times, rows, strict=True)]
+            assert bag_write._write_rows_mcap(writer, streams, times)
+            stamp = int(times[-1]) + 1000
+    with Reader(tmp_path / "mixed") as reader:
+        assert {c.topic: c.msgcount for c in reader.connections} == {t: len(m) for t, m in sent.items()}
+        got: dict[str, list[tuple[int, bytes]]] = {t: [] for t in sent}
+        for connection, timestamp, raw in reader.messages():
+            got[connection.topic].append((timestamp, bytes(raw)))
+        assert got == sent
+        middle = (reader.start_time + reader.end_time) // 2
+        window = [(c.topic, t) for c, t, _ in reader.messages(start=middle, stop=middle + 5 * 10**6)]
+    expected = sorted((t, topic) for topic, m in sent.items() for t, _ in m if middle <= t < middle + 5 * 10**6)
+    assert sorted((t, topic) for topic, t in window) == expected and len(expected) > 5000
+    assert message_indexes_point_at_their_messages(tmp_path / "mixed" / "mixed.mcap") == sum(map(len, sent.values()))
+
+
+def message_indexes_point_at_their_messages(path: Path) -> int:
+    """Checks, by the MCAP specification, that every message index record (opcode 0x07) after a chunk
+    (0x06, uncompressed) lists each message of its channel in that chunk, by log time and offset into
+    the chunk's records; returns how many messages the indexes list."""
+    data = path.read_bytes()
+    position, records, listed = 8, None, 0
+    in_chunk: dict[int, list[tuple[int, int]]] = {}
+    while position < len(data) - 8:
+        opcode = data[position]
+        length = int.from_bytes(data[position + 1 : position + 9], "little")
+        body = data[position + 9 : position + 9 + length]
+        position += 9 + length
+        if opcode == 0x06:
+            compression_length = int.from_bytes(body[28:32], "little")
+            assert body[32 : 32 + compression_length] == b""
+            records = body[32 + compression_length + 8 :]
+            assert len(records) == int.from_bytes(body[16:24], "little")
+            in_chunk = {}
+            at = 0
+            while at < len(records):
+                size = int.from_bytes(records[at + 1 : at + 9], "little")
+                if records[at] == 0x05:
+                    channel = int.from_bytes(records[at + 9 : at + 11], "little")
+                    log_time = int.from_bytes(records[at + 15 : at + 23], "little")
+                    in_chunk.setdefault(channel, []).append((log_time, at))
+                at += 9 + size
+        elif opcode == 0x07:
+            channel = int.from_bytes(body[0:2], "little")
+            pairs = np.frombuffer(body[6:], dtype="<u8").reshape(-1, 2)
+            assert int.from_bytes(body[2:6], "little") == pairs.nbytes
+            assert [tuple(p) for p in pairs.tolist()] == in_chunk.pop(channel), channel
+            listed += len(pairs)
+    return listed
+
+
 def test_the_fast_mcap_path_is_only_taken_with_the_rosbags_releases_it_was_checked_against(
     tmp_path, monkeypatch
 ) -> None:

@@ -220,11 +220,13 @@ def _write_rows_mcap(writer: Any, streams: list[tuple[Any, np.ndarray]], log_tim
         base = chunk.bio.tell()
         chunk.bio.write(block.tobytes())
         offsets = base + np.arange(len(times), dtype=np.int64) * record.itemsize
-        stamps = times.tolist()
         for k, (connection, _) in enumerate(streams):
-            chunk.msgs[connection.id].extend(zip(stamps, (offsets + starts[k]).tolist(), strict=True))
-            storage.channel_stats[connection.id] += len(stamps)
-            writer.counts[connection.id] += len(stamps)
+            index = chunk.msgs.get(connection.id)
+            if not isinstance(index, _ArrayIndex):
+                index = chunk.msgs[connection.id] = _ArrayIndex(index or ())
+            index.add(times, offsets + starts[k])
+            storage.channel_stats[connection.id] += len(times)
+            writer.counts[connection.id] += len(times)
         low, high = int(times.min()), int(times.max())
         chunk.message_start_time = min(chunk.message_start_time, low)
         chunk.message_end_time = max(chunk.message_end_time, high)
@@ -233,5 +235,79 @@ def _write_rows_mcap(writer: Any, streams: list[tuple[Any, np.ndarray]], log_tim
         writer.min_timestamp = min(writer.min_timestamp, low)
         writer.max_timestamp = max(writer.max_timestamp, high)
         if chunk.bio.tell() > _CHUNK_BYTES:
-            storage.close_chunk()
+            _close_chunk(storage)
     return True
+
+
+class _ArrayIndex(list):
+    """A chunk's message index of one channel, (log time, offset) pairs, kept as arrays for the
+    batches written by :func:`_write_rows_mcap` after the pairs rosbags appended one by one (the list
+    itself). Iterating yields every pair as Python ints, in writing order, as rosbags' own
+    ``close_chunk`` expects; :func:`_close_chunk` takes the arrays as they are."""
+
+    def __init__(self, pairs: Any = ()) -> None:
+        super().__init__(pairs)
+        self.batches: list[np.ndarray] = []
+
+    def add(self, times: np.ndarray, offsets: np.ndarray) -> None:
+        self.batches.append(np.stack([times, offsets], axis=1).astype("<u8"))
+
+    def append(self, pair: Any) -> None:  # rosbags' message-by-message write, after batches
+        self.batches.append(np.asarray([pair], dtype="<u8"))
+
+    def pairs(self) -> np.ndarray:
+        head = np.asarray(self[:], dtype="<u8").reshape(-1, 2)
+        return np.concatenate([head, *self.batches]) if self.batches else head
+
+    def __iter__(self) -> Any:
+        return iter([tuple(pair) for pair in self.pairs().tolist()])
+
+    def __len__(self) -> int:
+        return list.__len__(self) + sum(len(b) for b in self.batches)
+
+    def __bool__(self) -> bool:
+        return len(self) > 0
+
+
+def _close_chunk(storage: Any) -> None:
+    """What rosbags' ``McapWriter.close_chunk`` writes (the chunk record, one message index record per
+    channel, the chunk's index entry kept for the summary), with the message indexes written from
+    arrays and the chunk's bytes written without intermediate copies. Uncompressed chunks only;
+    compressed ones go through rosbags."""
+    from io import BytesIO
+
+    chunk = storage.chunk
+    if storage.compression:
+        storage.close_chunk()
+        return
+    data = chunk.bio.getbuffer()
+    size = len(data)
+    compression = storage.compression.encode()
+    head = np.array([chunk.message_start_time, chunk.message_end_time, size], dtype="<u8").tobytes()
+    body = head + (0).to_bytes(4, "little") + len(compression).to_bytes(4, "little") + compression
+    body += size.to_bytes(8, "little")
+    bio = storage.bio
+    chunk_start = bio.tell()
+    bio.write(b"\x06" + (len(body) + size).to_bytes(8, "little") + body)
+    bio.write(data)
+    del data
+    chunk_end = bio.tell()
+    offsets: list[tuple[int, int]] = []
+    for cid, index in chunk.msgs.items():
+        pairs = index.pairs() if isinstance(index, _ArrayIndex) else np.asarray(index, dtype="<u8").reshape(-1, 2)
+        offsets.append((cid, bio.tell()))
+        payload = pairs.tobytes()
+        record = cid.to_bytes(2, "little") + len(payload).to_bytes(4, "little")
+        bio.write(b"\x07" + (len(record) + len(payload)).to_bytes(8, "little") + record)
+        bio.write(payload)
+    entry = BytesIO()
+    entry.write(head[:16])
+    entry.write(chunk_start.to_bytes(8, "little") + (chunk_end - chunk_start).to_bytes(8, "little"))
+    entry.write((len(offsets) * 10).to_bytes(4, "little"))
+    for cid, offset in offsets:
+        entry.write(cid.to_bytes(2, "little") + offset.to_bytes(8, "little"))
+    entry.write((bio.tell() - chunk_end).to_bytes(8, "little"))
+    entry.write(len(compression).to_bytes(4, "little") + compression)
+    entry.write(size.to_bytes(8, "little") + size.to_bytes(8, "little"))
+    storage.chunks.append(entry)
+    storage.chunk = type(chunk)(2**63 - 1, 0, BytesIO(), type(chunk.msgs)(list))

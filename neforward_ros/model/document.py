@@ -47,9 +47,7 @@ def parse_document(data: bytes | str) -> Any:
     encoding = None
     if isinstance(data, str):
         data, encoding = data.encode("utf-8"), "utf-8"
-    parser = etree.XMLParser(
-        recover=True, remove_comments=True, remove_pis=True, huge_tree=True, encoding=encoding
-    )
+    parser = etree.XMLParser(recover=True, remove_comments=True, remove_pis=True, huge_tree=True, encoding=encoding)
     try:
         root = etree.fromstring(data, parser)
     except etree.XMLSyntaxError as exc:  # recovery found nothing to recover (an empty document)

@@ -1,8 +1,9 @@
 """``load_model``: a URDF file or text -> a :class:`RobotModel`.
 
 The XML is parsed by lxml and read by yourdfpy (:mod:`.document`, :mod:`.urdf`); yourdfpy is imported
-the first time a model is loaded (:mod:`.reader`). Reading a URDF then takes milliseconds, so nothing is
-kept between runs."""
+the first time a model is loaded (:mod:`.reader`), which takes about a second (it imports trimesh), so
+a model built from a description that needs no xacro is kept in the disk cache (:mod:`.stored`) and a
+description seen before is not read again."""
 
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from neforward_ros.logs import LogFunction, python_log
 from neforward_ros.model import xacro
 from neforward_ros.model.build import build_model
 from neforward_ros.model.document import parse_document, text_encoding
+from neforward_ros.model.stored import store_model, stored_model
 from neforward_ros.model.types import RobotModel
 from neforward_ros.model.urdf import read_robot
 
@@ -84,7 +86,8 @@ def _read_source(source: str | os.PathLike[str]) -> tuple[bytes | str, str | Non
 def _parse(data: bytes | str, path: str | None, root_link: str | None) -> RobotModel:
     root = parse_document(data)
     use = xacro.xacro_use(root)
-    if path is not None and (path.endswith(".xacro") or use.needed is not None):
+    expanded = path is not None and (path.endswith(".xacro") or use.needed is not None)
+    if expanded:
         root = parse_document(xacro.expand(path))
         use = xacro.xacro_use(root)
     if use.needed is not None:
@@ -92,6 +95,9 @@ def _parse(data: bytes | str, path: str | None, root_link: str | None) -> RobotM
             f"the URDF text is an unexpanded xacro file (it uses {use.needed}): expand it first "
             "(xacro robot.urdf.xacro > robot.urdf), as the launch file does"
         )
+    kept = None if expanded else stored_model(data, root_link)
+    if kept is not None:
+        return kept
     model = build_model(read_robot(root), root_link)
     if use.leftover is not None:
         ignored = (
@@ -99,4 +105,6 @@ def _parse(data: bytes | str, path: str | None, root_link: str | None) -> RobotM
             "ignores it; the links and joints use none"
         )
         model = replace(model, warnings=(*model.warnings, ignored))
+    if not expanded:
+        store_model(data, root_link, model)
     return model
