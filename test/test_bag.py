@@ -456,6 +456,46 @@ def test_chunks_of_samples_give_the_same_outputs_as_one_pass(tmp_path, monkeypat
     assert (tmp_path / "whole.csv").read_text() == (tmp_path / "chunked.csv").read_text()
 
 
+def test_a_block_of_stamps_without_output_at_any_edge_changes_nothing(tmp_path, monkeypatch) -> None:
+    """Blocks made only of stamps the estimates do not cover (the start's warm-up, the end's last
+    half window): for every block size putting a block edge at each of those stamps, the torques and
+    the stamps with output are those of one pass; the whole command too, with the last block's edge
+    at each stamp of the end (once a crash in the backward pass on an empty block, found on the
+    last 40 % of the Panda recording)."""
+    from neforward_ros.bag import compute
+    from neforward_ros.bag.read import read
+    from neforward_ros.bag.report import Progress
+    from neforward_ros.computation.compute import ComputeState
+
+    record(tmp_path / "in", seconds=0.5)
+    options = BagOptions.from_parameters({"publish_torques": True})
+    recording = read(tmp_path / "in", options, Progress(False))
+    model = recording.model
+    inputs = compute.prepare_inputs(recording, options, lambda what, fraction: None)
+
+    def torques(size: int) -> tuple[np.ndarray, np.ndarray]:
+        parts = list(compute.results(model, inputs, options, [], ComputeState.new(model, options.settings), size))
+        done = [r for r, _, _ in parts if r is not None]
+        return np.concatenate([r.stamp_ns for r in done]), np.concatenate([r.dynamics.torques for r in done])
+
+    stamps, expected = torques(len(inputs))
+    count = len(inputs)
+    first = int(np.searchsorted(inputs.states.stamps, stamps[0]))
+    last = int(np.searchsorted(inputs.states.stamps, stamps[-1]))
+    assert first >= 2 and count - 1 - last >= 2  # stamps without output at both ends
+    for size in sorted({*range(1, first + 2), *(count - j for j in range(1, count - last + 1))}):
+        got_stamps, got = torques(size)
+        assert np.array_equal(got_stamps, stamps) and np.array_equal(got, expected), size
+    whole = process_bag(tmp_path / "in", tmp_path / "whole", options)
+    expected_out = read_output(tmp_path / "whole")
+    for size in (count - j for j in range(1, count - last + 1)):
+        monkeypatch.setattr(compute, "CHUNK", size)
+        report = process_bag(tmp_path / "in", tmp_path / f"c{size}", options)
+        assert report.samples_out == whole.samples_out, size
+        got_out = read_output(tmp_path / f"c{size}")
+        assert got_out.keys() == expected_out.keys() and all(got_out[t] == expected_out[t] for t in got_out), size
+
+
 def test_the_payload_example_finds_the_payload_in_the_external_torques(tmp_path) -> None:
     """examples/payload_recording.py: a 2 kg payload from 2 s to 4 s that the URDF does not know. The
     bag tool's contact intervals and external torques against J^T w computed by Pinocchio."""

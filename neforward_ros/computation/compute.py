@@ -125,7 +125,7 @@ class Computed:
 
     Attributes:
         result: what is published for the stamps (a batch's: for the rows in ``rows`` only); None
-            when nothing is (one stamp).
+            when nothing is (one stamp, or a batch none of whose rows is published).
         rows: a batch's input rows that have a result, (T',) indices; None for one stamp.
         known: (..., n) per input row, whether each joint's state is an estimate or held (after the
             policy).
@@ -170,6 +170,8 @@ def compute(
             return Computed(None, None, known_in, False, base_unknown)
     else:
         rows = np.flatnonzero(publish)
+        if not len(rows):  # a block with nothing to publish (stamps the estimates do not cover, at an end)
+            return Computed(None, rows, known_in, publish, base_unknown)
         if len(rows) < len(states):
             q, qd, qdd, known = q[rows], qd[rows], qdd[rows], known[rows]
             stamps, efforts = stamps[rows], efforts[rows]
