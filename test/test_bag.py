@@ -40,6 +40,10 @@ def record(path, *, seconds=4.0, velocities=False, storage=StoragePlugin.MCAP, d
         t = t[(t < extra["gap"]) | (t >= extra["gap"] + 0.3)]
         count = len(t)
     q, qd, _ = trajectory(t)
+    if "finger" in extra:  # the finger still at this position
+        q[:, -1], qd[:, -1] = extra["finger"], 0.0
+    if extra.get("without_finger"):  # a driver that does not send the finger's joint
+        q, qd = q[:, :-1], qd[:, :-1]
     store = typestore()
     with Writer(path, version=9, storage_plugin=storage) as writer:
         joint_states = writer.add_connection("/joint_states", topics.JOINT_STATE_TYPE, typestore=store)
@@ -48,7 +52,7 @@ def record(path, *, seconds=4.0, velocities=False, storage=StoragePlugin.MCAP, d
             writer.write(connection, EPOCH, cdr.encode(topics.STRING_TYPE, {"data": PANDA.read_text()}))
         for topic, kind in extra.get("other_topics", []):
             writer.add_connection(topic, kind, typestore=store)
-        names = extra.get("names", NAMES)
+        names = extra.get("names", NAMES[:-1] if extra.get("without_finger") else NAMES)
         strays = extra.get("strays", {})
         for run in range(runs):  # concatenated runs: stamps go back at each new run
             for k in range(count):
@@ -289,11 +293,6 @@ def bad_cases(tmp_path):
             tmp_path / "o3",
         ),
         (
-            [str(tmp_path / "missing_joint"), "-o", str(tmp_path / "o4"), "--publish-policy", "wait"],
-            "missing from /joint_states: panda_finger_joint1",
-            tmp_path / "o4",
-        ),
-        (
             [str(tmp_path / "ok"), "-o", str(tmp_path / "o8"), "--publish-policy", "hold", "--hold", "ghost=1"],
             "hold.joint_names (--hold) names joints that robot 'panda' does not have: ghost",
             tmp_path / "o8",
@@ -361,8 +360,8 @@ def test_batched_and_single_messages_in_the_same_chunks_read_back_in_order_throu
         single = writer.add_connection("/single", kind, typestore=typestore())
         pair = [writer.add_connection(topic, kind, typestore=typestore()) for topic in ("/a", "/b")]
         stamp = 10**18
-        for block in range(40):  # 40 x 3000 batched messages of 28 bytes: about 6 chunks
-            for _ in range(7):
+        for _ in range(40):  # 40 x 3000 batched messages of 28 bytes: about 6 chunks
+            for _single in range(7):
                 data = cdr.encode(kind, {"data": float(stamp)})
                 writer.write(single, stamp, data)
                 sent["/single"].append((stamp, bytes(data)))
@@ -494,6 +493,44 @@ def test_a_block_of_stamps_without_output_at_any_edge_changes_nothing(tmp_path, 
         assert report.samples_out == whole.samples_out, size
         got_out = read_output(tmp_path / f"c{size}")
         assert got_out.keys() == expected_out.keys() and all(got_out[t] == expected_out[t] for t in got_out), size
+
+
+@pytest.mark.parametrize("policy", ["partial", "wait", "hold"])
+def test_a_joint_never_in_the_recording_is_held_and_everything_else_is_computed(tmp_path, policy, capsys) -> None:
+    """A driver that does not send the gripper's joint: under every publish policy the finger is held
+    at --hold's position (at rest), and the torques, link states and external torques are those of a
+    recording where the finger is present and still at that position; the summary counts what each
+    topic got and warns once."""
+    record(tmp_path / "arm", seconds=1.0, without_finger=True)
+    record(tmp_path / "still", seconds=1.0, finger=0.02)
+    arguments = ["--torques", "--publish-policy", policy, "--hold", "panda_finger_joint1=0.02"]
+    assert main(["bag", str(tmp_path / "arm"), "-o", str(tmp_path / "held"), *arguments]) == 0
+    said = capsys.readouterr()
+    assert main(["bag", str(tmp_path / "still"), "-o", str(tmp_path / "present"), *arguments]) == 0
+    held, present = read_output(tmp_path / "held"), read_output(tmp_path / "present")
+    assert held.keys() == present.keys() and "/neforward/joint_torques" in held
+    store = typestore()
+    for topic in held:
+        assert [t for t, _ in held[topic]] == [t for t, _ in present[topic]], topic
+        assert len(held[topic]) > 350, topic
+    for topic, kind in (("/neforward/joint_torques", topics.JOINT_STATE_TYPE),):
+        for (_, a), (_, b) in zip(held[topic], present[topic], strict=True):
+            x, y = store.deserialize_cdr(a, kind), store.deserialize_cdr(b, kind)
+            np.testing.assert_allclose(x.effort, y.effort, rtol=0, atol=1e-9)
+    text = said.out + said.err
+    assert text.count("never in the recording") == 1 and "panda_finger_joint1 at 0.02" in text, text
+    count = len(held["/neforward/joint_torques"])
+    assert f"/neforward/joint_torques {count}" in text, text
+
+
+def test_the_summary_counts_what_each_topic_got(tmp_path, capsys) -> None:
+    """The summary says how many messages each output topic got, as the recording holds them."""
+    record(tmp_path / "in", seconds=1.0)
+    assert main(["bag", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--torques"]) == 0
+    text = capsys.readouterr()
+    written = read_output(tmp_path / "out")
+    for topic, got in written.items():
+        assert f"{topic} {len(got)}" in text.out + text.err, (topic, text)
 
 
 def test_the_payload_example_finds_the_payload_in_the_external_torques(tmp_path) -> None:

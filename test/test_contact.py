@@ -349,3 +349,29 @@ def test_calibration_finds_a_payload_with_the_scales_given(tmp_path) -> None:
     assert np.linalg.norm(np.subtract(found.payload.com, (0.02, -0.01, 0.08))) < 0.02, found.payload
     check_friction_within(found.parameters, loaded_arm.joints, 0.05, viscous_tolerance=0.10)
     assert found.parameters["payload.link"] == "link7"
+
+
+def test_calibration_with_a_joint_no_recording_has_fits_the_others(recordings, tmp_path) -> None:
+    """A URDF with a gripper finger the recordings never carry (its driver is separate): the finger is
+    held at rest, nothing of it is fitted, no contact threshold is set for it, and the arm's friction
+    comes out as without it (the finger weighs nothing here, as in the simulation)."""
+    from neforward_ros.calibration.calibrate import calibrate
+
+    text = arm_urdf().read_text()
+    finger = (
+        '<link name="finger"><inertial><mass value="1e-9"/><inertia ixx="1e-12" ixy="0" ixz="0" iyy="1e-12" '
+        'iyz="0" izz="1e-12"/></inertial></link>'
+        '<joint name="finger_joint" type="prismatic"><parent link="link7"/><child link="finger"/>'
+        '<axis xyz="0 1 0"/><limit lower="0" upper="0.04" effort="20" velocity="0.2"/></joint></robot>'
+    )
+    (tmp_path / "with_finger.urdf").write_text(text.replace("</robot>", finger))
+    found = calibrate([recordings["folder"] / "free"], {}, urdf=str(tmp_path / "with_finger.urdf"))
+    assert found.joint_names[-1] == "finger_joint" and len(found.joint_names) == 8
+    assert any("finger_joint is in none of the recordings" in note for note in found.notes), found.notes
+    assert found.parameters["contact.joint_names"] == list(found.joint_names[:7])
+    assert len(found.parameters["contact.thresholds"]) == 7 and all(
+        x > 0 for x in found.parameters["contact.thresholds"]
+    )
+    warned = " ".join(found.notes)
+    check_friction_within(found.parameters, recordings["joints"], 0.05, warned)
+    node_settings(found.parameters)

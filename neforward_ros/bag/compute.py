@@ -12,8 +12,8 @@ have published. A moving base's motion comes from the node's base tracker either
 from __future__ import annotations
 
 import itertools
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -31,6 +31,7 @@ from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.coverage import covered_mask
 from neforward_ros.estimation.repeats import repeated
 from neforward_ros.model import RobotModel
+from neforward_ros.parameters.settings import NodeSettings
 from neforward_ros.stamps import NS
 
 CHUNK = 8192
@@ -113,6 +114,8 @@ def raw_states(recording: Recording, options: BagOptions) -> tuple[RawStates | N
     velocities: bool | None = None
     for start, stop in _segments(recording):
         q, v, e, present = _message_rows(recording, start, stop)
+        for j, position in held_joints(recording, options.settings).items():
+            q[:, j], v[:, j], present[:, j] = position, 0.0, True  # efforts: NaN, none measured
         present &= np.isfinite(q)
         assembler = RawAssembler(n, max_gap)
         stamps = recording.stamps[start:stop].tolist()
@@ -224,7 +227,6 @@ def _whole(
         v = vs[inside][keep]
         use_velocity = settings.estimator.velocity_source != "differentiate" and bool(np.all(np.isfinite(v)))
         groups.setdefault((t_ns.tobytes(), use_velocity), []).append((j, q, v, es[inside][keep]))
-    absent += [model.joint_names[j] for j in range(n) if j not in recording.columns]
     for (t_bytes, use_velocity), members in groups.items():
         t_ns = np.frombuffer(t_bytes, dtype=np.int64)
         reach = (t_ns - origin) / NS  # every sample's time, repeated readings too: how far the samples go
@@ -257,6 +259,7 @@ def _whole(
         spread[:, joints] = np.where(unready[:, None], np.nan, std_at)
     ready = np.isfinite(state).all(axis=0)
     states = JointStates(targets, *np.where(ready, state, 0.0), ready, silent, efforts, spread)
+    states = with_held(states, held_joints(recording, settings))
     return states, recording.log_times[start:stop][first], sorted(set(absent))
 
 
@@ -324,15 +327,46 @@ def _replayed(
     index: dict[int, int] = {}  # a stamp's recording time: its first message's
     for k, stamp in enumerate(stamps):
         index.setdefault(stamp, k)
+    held = held_joints(recording, options.settings)
     seen = present.any(axis=0)
-    absent = [model.joint_names[j] for j in range(n) if not seen[j]]
+    absent = [model.joint_names[j] for j in range(n) if not seen[j] and j not in held]
     if not out:
         return JointStates.empty(n), np.zeros(0, dtype=np.int64), None, absent
-    states = JointStates.stack([states for states, _ in out])
+    states = with_held(JointStates.stack([states for states, _ in out]), held)
     times = np.array([log_times[index[s]] for s in states.stamps.tolist()], dtype=np.int64)
     motions = [motion for _, motion in out]
     base = None if motions[0] is None else LinkMotion.stack(motions)
     return states, times, base, absent
+
+
+def held_joints(recording: Recording, settings: NodeSettings) -> dict[int, float]:
+    """The joints of the model never in the recording (a gripper whose driver publishes elsewhere), by
+    column, with the position each is held at: ``hold.positions`` (``--hold``), else 0. Held joints
+    are at rest: their states are known at every stamp, whatever the publish policy, so that the
+    links, torques and contact of the others are computed; they have no measured effort."""
+    names = recording.model.joint_names
+    return {
+        j: float(settings.hold_positions.get(names[j], 0.0)) for j in range(len(names)) if j not in recording.columns
+    }
+
+
+def with_held(states: JointStates, held: Mapping[int, float]) -> JointStates:
+    """The states with the held joints at their positions, at rest, known where another joint has an
+    estimate (a held joint alone is no reason to publish; see :func:`held_joints`)."""
+    if not held:
+        return states
+    columns = list(held)
+    others = np.ones(states.q.shape[-1], dtype=bool)
+    others[columns] = False
+    q, qd, qdd, ready = states.q.copy(), states.qd.copy(), states.qdd.copy(), states.ready.copy()
+    q[..., columns] = [held[j] for j in columns]
+    qd[..., columns] = 0.0
+    qdd[..., columns] = 0.0
+    ready[..., columns] = ready[..., others].any(axis=-1, keepdims=True)
+    spread = None if states.acceleration_std is None else states.acceleration_std.copy()
+    if spread is not None:
+        spread[..., columns] = 0.0
+    return replace(states, q=q, qd=qd, qdd=qdd, ready=ready, acceleration_std=spread)
 
 
 def _message_rows(recording: Recording, start: int, stop: int) -> tuple[np.ndarray, ...]:

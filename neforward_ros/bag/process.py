@@ -153,6 +153,7 @@ def process_bag(
             write_plot(partials[-1], series, model)
             progress("plotting", 1.0)
         progress("finishing", 0.0)
+        written_counts = recording_writer.counts()
         written_recording = recording_writer.finish()
         finals = [Path(p) for p in (csv_path, plot_path) if p is not None]
         # All outputs appear together: an interrupt now waits until they are in place, and one that
@@ -179,6 +180,7 @@ def process_bag(
     assert recording_writer is not None
     shutil.rmtree(recording_writer.staging, ignore_errors=True)
     report.topics = recording_writer.topics
+    report.written = written_counts
     report.seconds = time.monotonic() - started
     return report
 

@@ -142,12 +142,8 @@ def read(source: Path, options: BagOptions, progress: Callable[[str, float], Non
     report.ignored_names = describe_names(unknown, "names") if unknown else ""
     report.segment_starts = np.flatnonzero(np.diff(segment[kept]) != 0) + 1
     missing = [model.joint_names[j] for j in range(len(model.joint_names)) if j not in columns]
-    if missing and settings.publish_policy == "wait":
-        raise InputError(
-            f"joints of robot {model.name!r} missing from {topic}: {', '.join(missing)} (publish policy wait: "
-            "nothing could be written; partial writes the links they do not move, hold holds them)"
-        )
     report.missing_joints = missing
+    report.held = {name: float(settings.hold_positions.get(name, 0.0)) for name in missing}
     return Recording(settings.model_of(model), report, stamps, times, columns, base)
 
 

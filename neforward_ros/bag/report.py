@@ -36,9 +36,11 @@ class BagReport:
     ignored_names: str = ""  # a bounded line: the count and a few examples
     segment_starts: Any = ()  # indices of the messages (as kept) that begin a new segment
     missing_joints: list[str] = field(default_factory=list)
+    held: dict[str, float] = field(default_factory=dict)  # the missing joints' held positions
     contacts: list[tuple[float, float | None]] = field(default_factory=list)  # s since the first joint state
     notes: list[str] = field(default_factory=list)
     topics: list[str] = field(default_factory=list)
+    written: dict[str, int] = field(default_factory=dict)  # messages per output topic
     seconds: float = 0.0
 
 
@@ -70,10 +72,17 @@ class Progress:
 
 def describe(report: BagReport) -> str:
     """The report as a few lines for the terminal."""
+    got = {topic: report.written.get(topic, 0) for topic in report.topics}
     lines = [
-        f"{report.messages} joint states from {report.joint_states_topic}; {report.samples_out} samples written "
-        f"to {', '.join(report.topics)} in {report.seconds:.1f} s",
+        f"{report.messages} joint states from {report.joint_states_topic}; {report.samples_out} stamps with output, "
+        f"in {report.seconds:.1f} s; messages written: {', '.join(f'{t} {n}' for t, n in got.items() if n)}",
     ]
+    empty = [topic for topic, n in got.items() if not n]
+    if empty:
+        lines.append(
+            f"nothing written to {', '.join(empty)}: no stamp had what they need (torques and contact: every joint's "
+            "estimate; external torques: measured efforts too)"
+        )
     if len(report.segments) > 1:
         lines.append(
             f"{len(report.segments)} segments (time went back between them and went on from there), each estimated "
@@ -96,7 +105,11 @@ def describe(report: BagReport) -> str:
         lines.append(f"contact: from {start:.3f} s {until} (since the first joint state)")
     lines.extend(report.notes)
     if report.missing_joints:
-        lines.append(f"joints of the model never in the recording: {', '.join(report.missing_joints)}")
+        held = ", ".join(f"{name} at {position:g}" for name, position in report.held.items())
+        lines.append(
+            f"warning: joints of the model never in the recording, held at rest ({held}): set their positions with "
+            "--hold NAME=VALUE (hold.joint_names, hold.positions)"
+        )
     if report.ignored_names:
         lines.append(f"ignored, not joints of the model: {report.ignored_names}")
     return "\n".join(lines)

@@ -140,6 +140,10 @@ class RecordingWriter:
                 self.writer.write(connection, times[i], cdr.encode(connection.msgtype, contents))
         return max(stop, start)
 
+    def counts(self) -> dict[str, int]:
+        """Messages written so far, per topic (every output topic, in :attr:`topics` order)."""
+        return {topic: int(self.writer.counts.get(self.connections[topic].id, 0)) for topic in self.topics}
+
     def finish(self) -> Path:
         """Close the recording; returns where it is (inside the staging folder)."""
         self.writer.close()

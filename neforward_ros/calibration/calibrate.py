@@ -9,15 +9,15 @@ thresholds out, as a params file the node and the bag tool take as it is.
 2. Each joint's effort scale and offset and its friction are fitted by least squares on the
    momentum equation, with no acceleration (:mod:`.fit`).
 3. The external torques the node would then publish on that free motion (the shared computation,
-   with the fitted parameters) give each joint's contact threshold: twice the largest of them
-   in absolute value (at least :data:`THRESHOLD_FLOOR`), so that the motion calibrated on raises no
-   contact, with a margin for what it did not show; a contact ends once every joint is under
-   :data:`RELEASE` of its threshold (hysteresis). The contact debounce is the observer's time
-   constant, 1 / gain (at least a millisecond): its output is already filtered, and a longer
-   debounce only delays the contact. Unless given, the observer's velocity cutoff is chosen among
-   :data:`CUTOFFS` on the free motion: the highest (the least lag) whose external torques have a
-   mean square within :data:`CUTOFF_SLACK` of the least, velocity noise against the lag of the
-   momentum's rate measured on the robot itself.
+   with the fitted parameters) give each joint's contact threshold from their distribution, per
+   speed, robustly (:mod:`.thresholds`: 3 x the largest 99th percentile of the speed terciles), so
+   that one outlier cannot blind detection; the stretches the thresholds leave above them are
+   reported, and the debounce rides over them. A contact ends once every joint is under
+   :data:`RELEASE` of its threshold (hysteresis). The contact debounce is at least the observer's
+   time constant, 1 / gain (at least a millisecond): its output is already filtered. Unless given,
+   the observer's velocity cutoff is chosen among :data:`CUTOFFS` on the free motion: the highest
+   (the least lag) whose external torques have a mean square within :data:`CUTOFF_SLACK` of the
+   least, velocity noise against the lag of the momentum's rate measured on the robot itself.
 """
 
 from __future__ import annotations
@@ -35,18 +35,15 @@ from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.read import Recording, read
 from neforward_ros.calibration.fit import JointFit, Windows, fit_joints, windows
 from neforward_ros.calibration.payload import Payload, fit_payload, payload_models
+from neforward_ros.calibration.thresholds import Excursion, debounce_over, excursions, robust_thresholds
 from neforward_ros.computation.compute import ComputeState, observe_raw
 from neforward_ros.computation.observer import RawStates
 from neforward_ros.errors import InputError
 from neforward_ros.kinematics.joint_space import momentum_values
 from neforward_ros.parameters.settings import node_settings
 
-THRESHOLD_MARGIN = 2.0
-"""Contact thresholds: this many times the largest external torque in the free motion."""
 RELEASE = 0.6
 """The contact's hysteresis: a contact ends once every joint is under this fraction of its threshold."""
-THRESHOLD_FLOOR = 0.05
-"""N m (N): the least contact threshold."""
 CUTOFFS = (0.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 """Hz: the observer's velocity cutoffs tried (0: no filter)."""
 CUTOFF_SLACK = 2.5
@@ -68,6 +65,7 @@ class Calibration:
         samples: joint states fitted on.
         notes: what could not be fitted, and why.
         payload: the payload fitted (``--payload``), or None.
+        outliers: the stretches of the free motion over the thresholds (:mod:`.thresholds`).
     """
 
     joint_names: tuple[str, ...]
@@ -80,6 +78,7 @@ class Calibration:
     samples: int
     notes: list[str] = field(default_factory=list)
     payload: Payload | None = None
+    outliers: list[Excursion] = field(default_factory=list)
 
 
 def calibrate(
@@ -119,6 +118,11 @@ def calibrate(
         raise InputError(f"--payload {payload}: robot {recordings[0].model.name!r} has no such link")
     model = options.settings.model_of(recordings[0].model)  # with the given payload, if any
     names = model.joint_names
+    # Joints never in a recording (a gripper whose driver is separate) are held there (the bag tool's
+    # rule): no effort of theirs is measured, so nothing of theirs is fitted; the others are.
+    held = sorted({model.joint_index[name] for recording in recordings for name in recording.report.missing_joints})
+    measured = np.ones(len(names), dtype=bool)
+    measured[held] = False
     prior_settings = options.settings
     prior = ComputeState.new(model, prior_settings).effort
     gravity_force = -np.asarray(prior_settings.gravity, dtype=float)
@@ -131,11 +135,11 @@ def calibrate(
         raw = _measured(recording, options, assembled, velocities)
         if raw is None:
             continue
-        known = np.isfinite(raw.efforts).all(axis=1)
+        known = np.isfinite(raw.efforts[:, measured]).all(axis=1) if measured.any() else np.zeros(len(raw), bool)
         values_k = momentum_values(model, raw.q, raw.qd, gravity_force)
         parts.append((raw, *_split(values_k), known))
     progress("preparing", 1.0)
-    if not parts:
+    if not any(known.any() for *_, known in parts):
         raise InputError("no joint state with every joint's position and effort: nothing to calibrate on")
     stamps, momentum, rest, efforts, qd, runs, offset = [], [], [], [], [], [], 0
     for raw, p, r, known in parts:
@@ -154,7 +158,7 @@ def calibrate(
     )  # fmt: skip
     # A payload's torques and the effort scales trade off: with --payload the scales are the given ones
     # (a calibration without the payload first, then this one with --params of it).
-    fits = fit_joints(data, names, prior, stribeck=stribeck, scale=payload is None)
+    fits = fit_joints(data, names, prior, stribeck=stribeck, scale=payload is None, held=held)
     found_payload = None
     if payload is not None:
         progress("payload", 0.0)
@@ -175,7 +179,7 @@ def calibrate(
 
         found_payload, corrected = fit_payload(data, unit_terms, fits, prior, payload)
         data = replace(data, target=corrected)
-        fits = fit_joints(data, names, prior, stribeck=stribeck, scale=False)
+        fits = fit_joints(data, names, prior, stribeck=stribeck, scale=False, held=held)
         progress("payload", 1.0)
     progress("fitting", 1.0)
     fitted = dict(values)
@@ -189,8 +193,9 @@ def calibrate(
     fitted.pop("contact.thresholds", None)
     progress("thresholds", 0.0)
     given = {**values, "publish_torques": True}
-    before, _ = _external(recordings, _options(given, urdf, joint_states_topic), raws)
-    after, method = _external(recordings, _options(fitted, urdf, joint_states_topic), raws)
+    before = _external(recordings, _options(given, urdf, joint_states_topic), raws).external
+    free = _external(recordings, _options(fitted, urdf, joint_states_topic), raws)
+    method = free.method
     if method == "observer" and "external_torques.velocity_cutoff" not in values:
         # The velocity cutoff for this robot and motion: velocity noise against the lag of the
         # momentum's rate. The highest cutoff (the least lag) whose external torques in this motion
@@ -198,28 +203,37 @@ def calibrate(
         trials = {}
         for cutoff in CUTOFFS:
             trial = {**fitted, "external_torques.velocity_cutoff": cutoff}
-            external, _ = _external(recordings, _options(trial, urdf, joint_states_topic), raws)
-            power = float(np.nanmean(np.square(external))) if len(external) else np.inf
-            trials[cutoff] = (power, external)
+            trial_motion = _external(recordings, _options(trial, urdf, joint_states_topic), raws)
+            known = np.isfinite(trial_motion.external)
+            power = float(np.mean(np.square(trial_motion.external[known]))) if known.any() else np.inf
+            trials[cutoff] = (power, trial_motion)
         least = min(power for power, _ in trials.values())
         cutoff = max((c for c, (power, _) in trials.items() if c > 0 and power <= CUTOFF_SLACK * least), default=0.0)
         if trials[0.0][0] <= least:
             cutoff = 0.0
         fitted["external_torques.velocity_cutoff"] = cutoff
-        after = trials[cutoff][1]
+        free = trials[cutoff][1]
+    after = free.external
     fitted_options = _options(fitted, urdf, joint_states_topic)
     progress("thresholds", 1.0)
-    largest = np.nanmax(np.abs(after), axis=0) if len(after) else np.full(len(names), np.nan)
-    thresholds = np.maximum(THRESHOLD_MARGIN * np.nan_to_num(largest, nan=0.0), THRESHOLD_FLOOR)
-    fitted["contact.joint_names"] = list(names)
-    fitted["contact.thresholds"] = [float(f"{x:.4g}") for x in thresholds]
+    thresholds = robust_thresholds(after, free.velocity, measured)
+    fitted["contact.joint_names"] = [name for name, ok in zip(names, measured, strict=True) if ok]
+    fitted["contact.thresholds"] = [float(f"{x:.4g}") for x, ok in zip(thresholds, measured, strict=True) if ok]
     fitted["contact.release"] = RELEASE
+    least = 0.0
     if method == "observer":
         gains = np.array([fitted_options.settings.observer_gains.get(n, fitted_options.settings.observer_gain)
                           for n in names])  # fmt: skip
-        fitted["contact.debounce"] = max(0.001, float(np.ceil(1000.0 / float(np.min(gains)))) / 1000.0)
+        least = max(0.001, float(np.ceil(1000.0 / float(np.min(gains)))) / 1000.0)
+    outliers = excursions(after, free.stamps, free.recording, thresholds)
+    steps = np.diff(free.stamps)[np.diff(free.recording) == 0]
+    interval = float(np.median(steps[steps > 0])) / 1e9 if (steps > 0).any() else 0.0
+    debounce = debounce_over(outliers, interval, least)
+    if debounce > 0.0:
+        fitted["contact.debounce"] = float(np.ceil(debounce * 1000.0) / 1000.0)
     node_settings(fitted)  # what is written is what the node accepts
     notes = [note for fit in fits for note in fit.notes]
+    notes += _outlier_notes(outliers, names, [str(p) for p in inputs], fitted.get("contact.debounce"))
     return Calibration(
         names,
         fits,
@@ -231,7 +245,34 @@ def calibrate(
         sum(len(p[0]) for p in parts),
         notes,
         found_payload,
+        outliers,
     )
+
+
+def _outlier_notes(found: list[Excursion], names: Sequence[str], inputs: list[str], debounce: Any) -> list[str]:
+    """What the thresholds left above them in the free motion, said: a count, the largest, and the
+    longest, and how the debounce deals with them."""
+    if not found:
+        return []
+    largest = max(found, key=lambda e: e.ratio)
+    longest = max(found, key=lambda e: e.seconds)
+
+    def where(e: Excursion) -> str:
+        return f"{names[e.joint]} {e.value:.3g} at {e.start_s:.2f} s of {inputs[e.recording]}"
+
+    notes = [
+        f"{len(found)} stretch(es) of the free motion over the thresholds left out of them as outliers "
+        f"({sum(e.samples for e in found)} samples; the furthest over its threshold: {where(largest)}; the longest: "
+        f"{longest.seconds * 1000:.0f} ms, {where(longest)}); contact.debounce {debounce:g} s rides over those "
+        "shorter than it"
+    ]
+    long = [e for e in found if debounce is None or e.seconds >= debounce]
+    if long:
+        notes.append(
+            f"{len(long)} stretch(es) over the thresholds last longer than the debounce (from {where(long[0])}): a "
+            "contact during the calibration motion? The node would report them as contacts"
+        )
+    return notes
 
 
 SMOOTHING = 0.02
@@ -285,14 +326,29 @@ def _measured(
     return RawStates(states.stamps[rows], states.q[rows], states.qd[rows], states.efforts[rows], restart)
 
 
-def _external(
-    recordings: list[Recording], options: BagOptions, raws: list[tuple[Any, bool | None]]
-) -> tuple[np.ndarray, str]:
-    """The external torques the node publishes on the recordings with these options, stacked, and the
-    method that gives them; ``raws``: each recording's :func:`raw_states` (states, velocities)."""
-    out = []
+@dataclass
+class FreeMotion:
+    """The external torques the node publishes on the recordings, stacked, where they are known.
+
+    Attributes:
+        external: (T, n) N m (N), NaN where unknown.
+        stamps: (T,) int ns; velocity: (T, n) the joint velocities there; recording: (T,) its index.
+        method: how they are estimated (observer or difference).
+    """
+
+    external: np.ndarray
+    stamps: np.ndarray
+    velocity: np.ndarray
+    recording: np.ndarray
+    method: str
+
+
+def _external(recordings: list[Recording], options: BagOptions, raws: list[tuple[Any, bool | None]]) -> FreeMotion:
+    """The external torques the node publishes on the recordings with these options; ``raws``: each
+    recording's :func:`raw_states` (states, velocities)."""
+    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []
     method = "difference"
-    for recording, (raw, velocities) in zip(recordings, raws, strict=True):
+    for k, (recording, (raw, velocities)) in enumerate(zip(recordings, raws, strict=True)):
         model = options.settings.model_of(recording.model)
         state = ComputeState.new(model, options.settings)
         if state.observer is not None:
@@ -302,21 +358,30 @@ def _external(
             if raw is not None:
                 observed = observe_raw(model, options.settings, raw, state)
                 assert observed is not None
-                out.append(observed.external)
+                parts.append((observed.external, np.asarray(observed.stamp_ns), raw.qd, k))
             continue
         inputs = prepare_inputs(recording, options, lambda what, fraction: None)
         for result, _, _ in results(model, inputs, options, [], state):
             if result is not None and result.dynamics is not None:
-                out.append(result.dynamics.external)
-    if not out:
-        return np.zeros((0, len(recordings[0].model.joint_names))), method
-    return np.concatenate(out), method
+                parts.append((result.dynamics.external, result.stamp_ns, result.dynamics.qd, k))
+    n = len(recordings[0].model.joint_names)
+    if not parts:
+        return FreeMotion(np.zeros((0, n)), np.zeros(0, np.int64), np.zeros((0, n)), np.zeros(0, np.int64), method)
+    return FreeMotion(
+        np.concatenate([p[0] for p in parts]),
+        np.concatenate([p[1] for p in parts]).astype(np.int64),
+        np.concatenate([p[2] for p in parts]),
+        np.concatenate([np.full(len(p[1]), p[3], dtype=np.int64) for p in parts]),
+        method,
+    )
 
 
 def _rms(external: np.ndarray) -> np.ndarray:
-    if not len(external):
-        return np.full(external.shape[1], np.nan)
-    return np.sqrt(np.nanmean(np.square(external), axis=0))
+    """Per joint, the RMS of its known values; NaN for a joint with none (held, never measured)."""
+    known = np.isfinite(external)
+    count = known.sum(axis=0)
+    total = np.where(known, np.square(external), 0.0).sum(axis=0)
+    return np.where(count > 0, np.sqrt(total / np.maximum(count, 1)), np.nan)
 
 
 def _fitted_parameters(names: Sequence[str], fits: list[JointFit], stribeck: bool) -> dict[str, Any]:

@@ -80,7 +80,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
 def describe(found: Calibration, output: Path) -> str:
     """The report: each joint's fitted parameters, its external torque RMS before and after, and its
     contact threshold; then what could not be fitted."""
-    from neforward_ros.calibration.calibrate import THRESHOLD_MARGIN
+    from neforward_ros.calibration.thresholds import MARGIN, QUANTILE
 
     rows = [
         f"calibrated on {found.samples} joint states; external torques by the {found.method}",
@@ -94,7 +94,8 @@ def describe(found: Calibration, output: Path) -> str:
         )
     rows.append(
         f"(RMS: the external torque in this free motion, N m (N), with the given parameters and with the fitted "
-        f"ones; threshold: {THRESHOLD_MARGIN:g} x its largest)"
+        f"ones; threshold: {MARGIN:g} x the largest {100 * QUANTILE:g}th percentile of its |external torque| over "
+        "three speed ranges)"
     )
     if found.payload is not None:
         p = found.payload

@@ -157,12 +157,30 @@ class JointFit:
 
 
 def fit_joints(
-    data: Windows, names: Sequence[str], prior: EffortModel, stribeck: bool = False, scale: bool = True
+    data: Windows,
+    names: Sequence[str],
+    prior: EffortModel,
+    stribeck: bool = False,
+    scale: bool = True,
+    held: Sequence[int] = (),
 ) -> list[JointFit]:
     """Each joint's parameters (see the module docstring); ``prior``: the values kept where the motion
-    does not tell (and the residual before); ``scale`` False keeps every scale at the prior's."""
+    does not tell (and the residual before); ``scale`` False keeps every scale at the prior's; ``held``:
+    joints never in the recordings (no effort measured), which keep the prior's values."""
     fits = []
     for j, name in enumerate(names):
+        if j in held:
+            kept = JointFit(
+                scale=float(prior.scale[j]),
+                offset=float(prior.offset[j]),
+                coulomb=float(prior.coulomb[j]),
+                viscous=float(prior.viscous[j]),
+                velocity_scale=float(prior.velocity_scale[j]),
+                stribeck=float(prior.stribeck[j]),
+            )
+            kept.notes.append(f"joint {name} is in none of the recordings (held at rest): nothing of it was fitted")
+            fits.append(kept)
+            continue
         fits.append(_fit_joint(data, j, name, prior, stribeck, scale))
     return fits
 
