@@ -34,6 +34,7 @@ from neforward_ros.bag.compute import prepare_inputs, raw_states, results
 from neforward_ros.bag.options import BagOptions
 from neforward_ros.bag.read import Recording, read
 from neforward_ros.calibration.fit import JointFit, Windows, fit_joints, windows
+from neforward_ros.calibration.inertial import Identified, identify
 from neforward_ros.calibration.payload import Payload, fit_payload, payload_models
 from neforward_ros.calibration.thresholds import Excursion, debounce_over, excursions, robust_thresholds
 from neforward_ros.computation.compute import ComputeState, observe_raw
@@ -66,6 +67,7 @@ class Calibration:
         notes: what could not be fitted, and why.
         payload: the payload fitted (``--payload``), or None.
         outliers: the stretches of the free motion over the thresholds (:mod:`.thresholds`).
+        identified: the inertial parameters identified (:mod:`.inertial`), or None.
     """
 
     joint_names: tuple[str, ...]
@@ -79,6 +81,7 @@ class Calibration:
     notes: list[str] = field(default_factory=list)
     payload: Payload | None = None
     outliers: list[Excursion] = field(default_factory=list)
+    identified: Identified | None = None
 
 
 def calibrate(
@@ -89,11 +92,13 @@ def calibrate(
     joint_states_topic: str | None = None,
     stribeck: bool = False,
     payload: str | None = None,
+    inertia: bool = True,
     progress: Callable[[str, float], None] = lambda what, fraction: None,
 ) -> Calibration:
     """Fit on the recordings (see the module docstring); ``values``: node parameters given (a params
     file, ``-p``), kept in the output and used as the prior of what the motion cannot tell;
-    ``payload``: a link whose payload (mass, centre of mass) is fitted too (:mod:`.payload`).
+    ``payload``: a link whose payload (mass, centre of mass) is fitted too (:mod:`.payload`);
+    ``inertia``: identify the links' inertial parameters first (:mod:`.inertial`; not with a payload).
 
     Raises:
         InputError: an unreadable recording, recordings of different robots, no joint state with
@@ -123,6 +128,15 @@ def calibrate(
     held = sorted({model.joint_index[name] for recording in recordings for name in recording.report.missing_joints})
     measured = np.ones(len(names), dtype=bool)
     measured[held] = False
+    identified = None
+    original = dict(values)  # "before": the parameters given, the URDF's inertias
+    if inertia and payload is None and measured.any():
+        progress("inertia", 0.0)
+        identified = _identified(recordings, options, model, measured)
+        values = {**values, **identified.values()}
+        options = BagOptions.from_parameters(values, urdf=urdf, joint_states_topic=joint_states_topic)
+        model = options.settings.model_of(recordings[0].model)
+        progress("inertia", 1.0)
     prior_settings = options.settings
     prior = ComputeState.new(model, prior_settings).effort
     gravity_force = -np.asarray(prior_settings.gravity, dtype=float)
@@ -192,7 +206,7 @@ def calibrate(
     fitted.pop("contact.joint_names", None)
     fitted.pop("contact.thresholds", None)
     progress("thresholds", 0.0)
-    given = {**values, "publish_torques": True}
+    given = {**original, "publish_torques": True}
     before = _external(recordings, _options(given, urdf, joint_states_topic), raws).external
     free = _external(recordings, _options(fitted, urdf, joint_states_topic), raws)
     method = free.method
@@ -233,6 +247,21 @@ def calibrate(
         fitted["contact.debounce"] = float(np.ceil(debounce * 1000.0) / 1000.0)
     node_settings(fitted)  # what is written is what the node accepts
     notes = [note for fit in fits for note in fit.notes]
+    given_scales = set(original.get("effort.joint_names", ())) if "effort.scale" in original else set()
+    unscaled = [
+        name
+        for name, fit, ok in zip(names, fits, measured, strict=True)
+        if ok and "scale" not in fit.fitted and name not in given_scales
+    ]
+    if unscaled and payload is None:
+        notes.append(
+            f"the effort scale of {', '.join(unscaled)} is not in these recordings and none was given: their torques "
+            "are in the units of their efforts (scale 1). Give it: "
+            + " ".join(f"--effort-scale {name}=GAIN" for name in unscaled)
+            + " (torque per effort unit, as a datasheet's drive gain), or effort.joint_names / effort.scale in "
+            "--params; or calibrate again on a recording with a known payload (--payload)"
+        )
+    notes += [] if identified is None else identified.notes
     notes += _outlier_notes(outliers, names, [str(p) for p in inputs], fitted.get("contact.debounce"))
     return Calibration(
         names,
@@ -246,7 +275,21 @@ def calibrate(
         notes,
         found_payload,
         outliers,
+        identified,
     )
+
+
+def _identified(recordings: list[Recording], options: BagOptions, model: Any, measured: np.ndarray) -> Identified:
+    """The inertial parameters, on every recording's stamps where each joint has an estimate (the
+    whole-recording estimator's) and each measured joint an effort."""
+    parts = []
+    for recording in recordings:
+        states = prepare_inputs(recording, options, lambda what, fraction: None).states
+        usable = states.ready.all(axis=1) & np.isfinite(states.efforts[:, measured]).all(axis=1)
+        parts.append((states.q[usable], states.qd[usable], states.qdd[usable], states.efforts[usable]))
+    q, qd, qdd, efforts = (np.concatenate([p[k] for p in parts]) for k in range(4))
+    effort = ComputeState.new(model, options.settings).effort
+    return identify(model, q, qd, qdd, efforts, measured, options.settings.gravity, effort.scale, effort.velocity_scale)
 
 
 def _outlier_notes(found: list[Excursion], names: Sequence[str], inputs: list[str], debounce: Any) -> list[str]:

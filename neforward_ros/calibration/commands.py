@@ -25,7 +25,20 @@ def add_calibrate_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "-p", "--param", action="append", default=[], metavar="NAME:=VALUE", help="a node parameter, as --params"
     )
+    parser.add_argument(
+        "--effort-scale",
+        action="append",
+        default=[],
+        metavar="JOINT=GAIN",
+        help="a joint's effort scale, torque per effort unit (a datasheet's drive gain): the prior, kept where the "
+        "motion cannot tell it, and the units of the inertial parameters; repeat for more joints",
+    )
     parser.add_argument("--stribeck", action="store_true", help="also fit a Stribeck term per joint")
+    parser.add_argument(
+        "--no-inertia",
+        action="store_true",
+        help="keep the URDF's inertial parameters (default: identify those the motion excites, inertial.*)",
+    )
     parser.add_argument(
         "--payload", metavar="LINK", help="also fit the mass and centre of mass of a payload on this link (payload.*)"
     )
@@ -49,6 +62,22 @@ def run_calibrate(args: argparse.Namespace) -> int:
             raise InputError(f"no such params file: {args.params}")
         values.update(load_params_file(args.params))
     values.update(command_line_parameters([t for rule in args.param for t in ("-p", rule)])[1])
+    if args.effort_scale:
+        scales = dict(zip(values.get("effort.joint_names", ()), values.get("effort.scale", ()), strict=False))
+        offsets = dict(zip(values.get("effort.joint_names", ()), values.get("effort.offset", ()), strict=False))
+        for item in args.effort_scale:
+            name, _, text = item.partition("=")
+            try:
+                gain = float(text)
+            except ValueError:
+                gain = float("nan")
+            if not name.strip() or not gain > 0.0:
+                raise InputError(f"--effort-scale takes JOINT=GAIN with a positive gain, got {item!r}")
+            scales[name.strip()] = gain
+        values["effort.joint_names"] = list(scales)
+        values["effort.scale"] = [float(v) for v in scales.values()]
+        if offsets:
+            values["effort.offset"] = [float(offsets.get(name, 0.0)) for name in scales]
     found = calibrate(
         [Path(p) for p in args.inputs],
         values,
@@ -56,6 +85,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
         joint_states_topic=args.joint_states,
         stribeck=args.stribeck,
         payload=args.payload,
+        inertia=not args.no_inertia,
         progress=Progress(),
     )
     text = params_yaml(found.parameters, header=_header(found, args.inputs))
@@ -97,6 +127,14 @@ def describe(found: Calibration, output: Path) -> str:
         f"ones; threshold: {MARGIN:g} x the largest {100 * QUANTILE:g}th percentile of its |external torque| over "
         "three speed ranges)"
     )
+    if found.identified is not None:
+        ident = found.identified
+        told = int(ident.told.sum())
+        rows.append(
+            f"inertial parameters: {told} of {ident.told.size} identified on {len(ident.links)} links ({ident.rank} "
+            "combinations excited); the torque equation's RMS residual per joint, URDF -> identified: "
+            + ", ".join(f"{a:.3g} -> {b:.3g}" for a, b in zip(ident.residual_before, ident.residual_after, strict=True))
+        )
     if found.payload is not None:
         p = found.payload
         if p.mass > 0:

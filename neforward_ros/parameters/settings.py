@@ -13,6 +13,7 @@ from neforward_ros.estimation.settings import METHODS, MODES, VELOCITY_SOURCES, 
 from neforward_ros.kinematics.effort_model import DEFAULT_STRIBECK_VELOCITY, DEFAULT_VELOCITY_SCALE
 from neforward_ros.kinematics.forward import DEFAULT_GRAVITY
 from neforward_ros.model import RobotModel, with_payload
+from neforward_ros.model.inertials import with_inertials
 from neforward_ros.parameters.qos_overrides import QOS_OVERRIDES, QosOverride, qos_overrides
 from neforward_ros.parameters.table import (
     ACCELERATION_SOURCES,
@@ -50,6 +51,8 @@ class NodeSettings:
         observer_gain: 1/s; observer_gains: joint name -> its own gain.
         velocity_cutoff: Hz, the observer's velocity low-pass (0: none).
         payload: (link, mass kg, centre of mass in the link frame m), or None.
+        inertials: per link (name, mass kg, centre of mass m, inertia about it (6) kg m^2) replacing
+            the URDF's (``inertial.*``).
         wrench_links: links with ~/<link>/wrench.
         contact_thresholds: joint name -> |external torque| threshold; empty: no ~/contact.
         contact_debounce: s.
@@ -85,6 +88,7 @@ class NodeSettings:
     observer_gains: Mapping[str, float] = field(default_factory=dict)
     velocity_cutoff: float = DEFAULT_VELOCITY_CUTOFF
     payload: tuple[str, float, tuple[float, float, float]] | None = None
+    inertials: tuple[tuple[str, float, tuple[float, ...], tuple[float, ...]], ...] = ()
     wrench_links: tuple[str, ...] = ()
     contact_thresholds: Mapping[str, float] = field(default_factory=dict)
     contact_debounce: float = 0.02
@@ -115,11 +119,12 @@ class NodeSettings:
 
     @property
     def named_links(self) -> tuple[str, ...]:
-        """The links that accel_links, imu_links, wrench_links and contact.link name (each must be the
-        model's)."""
+        """The links that accel_links, imu_links, wrench_links, contact.link, payload.link and
+        inertial.link_names name (each must be the model's)."""
         contact = (self.contact_link,) if self.contact_link else ()
         payload = (self.payload[0],) if self.payload else ()
-        return (*self.accel_links, *self.imu_links, *self.wrench_links, *contact, *payload)
+        inertial = tuple(entry[0] for entry in self.inertials)
+        return (*self.accel_links, *self.imu_links, *self.wrench_links, *contact, *payload, *inertial)
 
     @property
     def named_joints(self) -> tuple[tuple[str, Mapping[str, float]], ...]:
@@ -134,8 +139,11 @@ class NodeSettings:
         )
 
     def model_of(self, model: RobotModel) -> RobotModel:
-        """The model the computation uses: the URDF's, with ``payload.*``'s point mass when given (and
-        its link is the model's; the callers report one that is not)."""
+        """The model the computation uses: the URDF's, with ``inertial.*``'s parameters and
+        ``payload.*``'s point mass when given (for links of the model; the callers report others)."""
+        known = [entry for entry in self.inertials if entry[0] in model.link_index]
+        if known:
+            model = with_inertials(model, *zip(*known, strict=True))
         if self.payload is None or self.payload[0] not in model.link_index:
             return model
         return with_payload(model, *self.payload)
@@ -209,6 +217,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         if len(com) != 3 or not merged["payload.mass"] >= 0.0:
             raise InputError("parameters payload.mass (kg, >= 0) and payload.com (x, y, z in m) describe the payload")
         payload = (merged["payload.link"], merged["payload.mass"], (float(com[0]), float(com[1]), float(com[2])))
+    inertials = _inertials(merged)
     observer_gains = _per_joint(merged, "external_torques.joint_names", "external_torques.gains")
     if not merged["external_torques.gain"] > 0.0 or any(not v > 0.0 for v in observer_gains.values()):
         raise InputError("parameters external_torques.gain and external_torques.gains must be positive (1/s)")
@@ -259,6 +268,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         effort_offset=effort_offset,
         friction=friction,
         payload=payload,
+        inertials=inertials,
         external_method=merged["external_torques.method"],
         observer_gain=merged["external_torques.gain"],
         observer_gains=observer_gains,
@@ -336,3 +346,20 @@ def _whole_number(name: str, value: int) -> str:
         f"parameter {name} must be double, got the integer {value}: "
         f"ROS 2 reads a number without a decimal point as an integer; write {value}.0"
     )
+
+
+def _inertials(merged: Mapping[str, Any]) -> tuple[tuple[str, float, tuple[float, ...], tuple[float, ...]], ...]:
+    links = list(merged["inertial.link_names"])
+    masses, coms, inertias = (list(merged[f"inertial.{k}"]) for k in ("mass", "com", "inertia"))
+    if len(masses) != len(links) or len(coms) != 3 * len(links) or len(inertias) != 6 * len(links):
+        raise InputError(
+            "parameters inertial.mass, inertial.com and inertial.inertia need 1, 3 and 6 numbers per link of "
+            f"inertial.link_names ({len(links)} links: got {len(masses)}, {len(coms)}, {len(inertias)})"
+        )
+    if any(not m >= 0.0 for m in masses) or not all(math.isfinite(x) for x in [*masses, *coms, *inertias]):
+        raise InputError("parameters inertial.*: finite numbers, masses >= 0")
+    return tuple(
+        (link, float(masses[k]), tuple(float(x) for x in coms[3 * k : 3 * k + 3]),
+         tuple(float(x) for x in inertias[6 * k : 6 * k + 6]))
+        for k, link in enumerate(links)
+    )  # fmt: skip
