@@ -129,15 +129,18 @@ def main() -> None:
     parser.add_argument("--realdata", default=str(Path(__file__).resolve().parents[2] / "shared" / "realdata"))
     parser.add_argument("--gains", action="store_true", help="give the UR10e's drive gains as effort scales")
     parser.add_argument("--only", choices=("panda", "ur10e"))
+    parser.add_argument("--keep", metavar="DIR", help="write the recordings and params here (an empty folder) and keep them")
     args = parser.parse_args()
     realdata = Path(args.realdata)
     if not realdata.is_dir():
         raise SystemExit(f"no {realdata}: the real recordings (see the brief) are not here")
     with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(args.keep) if args.keep else Path(tmp)
+        folder.mkdir(parents=True, exist_ok=True)
         if args.only in (None, "panda"):
-            panda(realdata, Path(tmp))
+            panda(realdata, folder)
         if args.only in (None, "ur10e"):
-            ur10e(realdata, Path(tmp), args.gains)
+            ur10e(realdata, folder, args.gains)
 
 
 if __name__ == "__main__":

@@ -128,51 +128,24 @@ def calibrate(
     held = sorted({model.joint_index[name] for recording in recordings for name in recording.report.missing_joints})
     measured = np.ones(len(names), dtype=bool)
     measured[held] = False
-    identified = None
     original = dict(values)  # "before": the parameters given, the URDF's inertias
+    here = _momentum_fit(recordings, options, model, measured, held, stribeck, payload, progress)
+    identified = None
     if inertia and payload is None and measured.any():
+        # The inertial parameters, with the friction's shapes the momentum fit found; then that fit
+        # again, with the model identified.
         progress("inertia", 0.0)
-        identified = _identified(recordings, options, model, measured)
-        values = {**values, **identified.values()}
-        options = BagOptions.from_parameters(values, urdf=urdf, joint_states_topic=joint_states_topic)
-        model = options.settings.model_of(recordings[0].model)
+        shapes = np.array([fit.velocity_scale for fit in here.fits])
+        identified = _identified(recordings, options, model, measured, shapes)
+        if identified.links:
+            values = {**values, **identified.values()}
+            options = BagOptions.from_parameters(values, urdf=urdf, joint_states_topic=joint_states_topic)
+            model = options.settings.model_of(recordings[0].model)
+            here = _momentum_fit(recordings, options, model, measured, held, stribeck, payload, progress)
         progress("inertia", 1.0)
-    prior_settings = options.settings
-    prior = ComputeState.new(model, prior_settings).effort
-    gravity_force = -np.asarray(prior_settings.gravity, dtype=float)
-    parts = []
-    raws: list[tuple[RawStates | None, bool | None]] = []
-    for k, recording in enumerate(recordings):
-        progress("preparing", k / len(recordings))
-        assembled, _, velocities = raw_states(recording, options)
-        raws.append((assembled, velocities))
-        raw = _measured(recording, options, assembled, velocities)
-        if raw is None:
-            continue
-        known = np.isfinite(raw.efforts[:, measured]).all(axis=1) if measured.any() else np.zeros(len(raw), bool)
-        values_k = momentum_values(model, raw.q, raw.qd, gravity_force)
-        parts.append((raw, *_split(values_k), known))
-    progress("preparing", 1.0)
-    if not any(known.any() for *_, known in parts):
-        raise InputError("no joint state with every joint's position and effort: nothing to calibrate on")
-    stamps, momentum, rest, efforts, qd, runs, offset = [], [], [], [], [], [], 0
-    for raw, p, r, known in parts:
-        edges = [0, *np.flatnonzero(raw.restart[1:] | ~known[1:] | ~known[:-1]) + 1, len(raw)]
-        runs += [(offset + a, offset + b) for a, b in itertools.pairwise(edges) if known[a]]
-        stamps.append(raw.stamps)
-        momentum.append(p)
-        rest.append(r)
-        efforts.append(raw.efforts)
-        qd.append(_smoothed(raw.qd, raw.stamps, [(a - offset, b - offset) for a, b in runs if a >= offset]))
-        offset += len(raw)
-    progress("fitting", 0.0)
-    data = windows(
-        np.concatenate(stamps), np.concatenate(momentum), np.concatenate(rest), np.concatenate(efforts),
-        np.concatenate(qd), runs,
-    )  # fmt: skip
-    # A payload's torques and the effort scales trade off: with --payload the scales are the given ones
-    # (a calibration without the payload first, then this one with --params of it).
-    fits = fit_joints(data, names, prior, stribeck=stribeck, scale=payload is None, held=held)
+    parts, raws, data, fits, prior = here.parts, here.raws, here.data, here.fits, here.prior
+    stamps, efforts, qd, runs = here.stamps, here.efforts, here.qd, here.runs
+    gravity_force = -np.asarray(options.settings.gravity, dtype=float)
     found_payload = None
     if payload is not None:
         progress("payload", 0.0)
@@ -279,7 +252,9 @@ def calibrate(
     )
 
 
-def _identified(recordings: list[Recording], options: BagOptions, model: Any, measured: np.ndarray) -> Identified:
+def _identified(
+    recordings: list[Recording], options: BagOptions, model: Any, measured: np.ndarray, shapes: np.ndarray
+) -> Identified:
     """The inertial parameters, on every recording's stamps where each joint has an estimate (the
     whole-recording estimator's) and each measured joint an effort."""
     parts = []
@@ -288,8 +263,10 @@ def _identified(recordings: list[Recording], options: BagOptions, model: Any, me
         usable = states.ready.all(axis=1) & np.isfinite(states.efforts[:, measured]).all(axis=1)
         parts.append((states.q[usable], states.qd[usable], states.qdd[usable], states.efforts[usable]))
     q, qd, qdd, efforts = (np.concatenate([p[k] for p in parts]) for k in range(4))
-    effort = ComputeState.new(model, options.settings).effort
-    return identify(model, q, qd, qdd, efforts, measured, options.settings.gravity, effort.scale, effort.velocity_scale)
+    settings = options.settings
+    effort = ComputeState.new(model, settings).effort
+    given = np.array([name in settings.effort_scale for name in model.joint_names])
+    return identify(model, q, qd, qdd, efforts, measured, settings.gravity, effort.scale, shapes, given)
 
 
 def _outlier_notes(found: list[Excursion], names: Sequence[str], inputs: list[str], debounce: Any) -> list[str]:
@@ -316,6 +293,72 @@ def _outlier_notes(found: list[Excursion], names: Sequence[str], inputs: list[st
             "contact during the calibration motion? The node would report them as contacts"
         )
     return notes
+
+
+@dataclass
+class _Momentum:
+    """The momentum fit of every joint (:mod:`.fit`) and what it was made of."""
+
+    parts: list[Any]
+    raws: list[tuple[RawStates | None, bool | None]]
+    stamps: list[np.ndarray]
+    efforts: list[np.ndarray]
+    qd: list[np.ndarray]
+    runs: list[tuple[int, int]]
+    data: Windows
+    fits: list[JointFit]
+    prior: Any
+
+
+def _momentum_fit(
+    recordings: list[Recording],
+    options: BagOptions,
+    model: Any,
+    measured: np.ndarray,
+    held: list[int],
+    stribeck: bool,
+    payload: str | None,
+    progress: Callable[[str, float], None],
+) -> _Momentum:
+    """Each joint's scale, offset and friction on the momentum equation, with this model."""
+    names = model.joint_names
+    prior_settings = options.settings
+    prior = ComputeState.new(model, prior_settings).effort
+    gravity_force = -np.asarray(prior_settings.gravity, dtype=float)
+    parts = []
+    raws: list[tuple[RawStates | None, bool | None]] = []
+    for k, recording in enumerate(recordings):
+        progress("preparing", k / len(recordings))
+        assembled, _, velocities = raw_states(recording, options)
+        raws.append((assembled, velocities))
+        raw = _measured(recording, options, assembled, velocities)
+        if raw is None:
+            continue
+        known = np.isfinite(raw.efforts[:, measured]).all(axis=1) if measured.any() else np.zeros(len(raw), bool)
+        values_k = momentum_values(model, raw.q, raw.qd, gravity_force)
+        parts.append((raw, *_split(values_k), known))
+    progress("preparing", 1.0)
+    if not any(known.any() for *_, known in parts):
+        raise InputError("no joint state with every joint's position and effort: nothing to calibrate on")
+    stamps, momentum, rest, efforts, qd, runs, offset = [], [], [], [], [], [], 0
+    for raw, p, r, known in parts:
+        edges = [0, *np.flatnonzero(raw.restart[1:] | ~known[1:] | ~known[:-1]) + 1, len(raw)]
+        runs += [(offset + a, offset + b) for a, b in itertools.pairwise(edges) if known[a]]
+        stamps.append(raw.stamps)
+        momentum.append(p)
+        rest.append(r)
+        efforts.append(raw.efforts)
+        qd.append(_smoothed(raw.qd, raw.stamps, [(a - offset, b - offset) for a, b in runs if a >= offset]))
+        offset += len(raw)
+    progress("fitting", 0.0)
+    data = windows(
+        np.concatenate(stamps), np.concatenate(momentum), np.concatenate(rest), np.concatenate(efforts),
+        np.concatenate(qd), runs,
+    )  # fmt: skip
+    # A payload's torques and the effort scales trade off: with --payload the scales are the given ones
+    # (a calibration without the payload first, then this one with --params of it).
+    fits = fit_joints(data, names, prior, stribeck=stribeck, scale=payload is None, held=held)
+    return _Momentum(parts, raws, stamps, efforts, qd, runs, data, fits, prior)
 
 
 SMOOTHING = 0.02

@@ -127,7 +127,7 @@ def describe(found: Calibration, output: Path) -> str:
         f"ones; threshold: {MARGIN:g} x the largest {100 * QUANTILE:g}th percentile of its |external torque| over "
         "three speed ranges)"
     )
-    if found.identified is not None:
+    if found.identified is not None and found.identified.links:
         ident = found.identified
         told = int(ident.told.sum())
         rows.append(

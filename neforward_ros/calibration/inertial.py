@@ -46,6 +46,15 @@ TOLD = 0.5
 """A parameter is identified where the data bring its standard deviation below this fraction of the prior's."""
 VELOCITY_SCALE = 0.01
 """rad/s: the friction's smooth sign, tanh(q̇ / this), where the prior gives none."""
+TRAIN = 0.7
+"""The identification is first made on this fraction of the samples (the first) and judged on the rest."""
+BETTER = 0.8
+"""Identified parameters are kept only where they cut the held-out mean square to this fraction of the URDF's."""
+UNITS = 2.0
+"""Efforts whose scale (with the URDF's parameters) is beyond this factor of 1 are not torques."""
+MAX_EVALUATIONS = 500
+"""The fit's budget of evaluations: the data's part converges in far fewer; what is left is the prior
+slowly pulling the directions the data do not see back towards the URDF (they change no torque)."""
 UNKNOWNS = 3
 """Each joint's own unknowns in the fit: offset, Coulomb and viscous friction."""
 
@@ -118,22 +127,33 @@ def to_cholesky(p: np.ndarray) -> np.ndarray:
 
 
 def from_cholesky(theta: np.ndarray) -> np.ndarray:
-    """The ten log-Cholesky numbers -> a link's parameters (physically consistent)."""
-    alpha, d1, d2, d3, s12, s23, s13, t1, t2, t3 = theta
-    u = np.exp(alpha) * np.array(
-        [[np.exp(d1), s12, s13, t1], [0.0, np.exp(d2), s23, t2], [0.0, 0.0, np.exp(d3), t3], [0.0, 0.0, 0.0, 1.0]]
-    )
-    return _from_pseudo(u @ u.T)
-
-
-def _derivative(theta: np.ndarray) -> np.ndarray:
-    """(10, 10) d parameters / d theta, by central differences."""
-    out = np.zeros((10, 10))
-    for k in range(10):
-        step = np.zeros(10)
-        step[k] = 1e-6
-        out[:, k] = (from_cholesky(theta + step) - from_cholesky(theta - step)) / 2e-6
+    """The ten log-Cholesky numbers -> a link's parameters (physically consistent); (..., 10) -> (..., 10)."""
+    theta = np.asarray(theta, dtype=float)
+    alpha, d1, d2, d3, s12, s23, s13, t1, t2, t3 = np.moveaxis(theta, -1, 0)
+    scale = np.exp(alpha)
+    u = np.zeros((*theta.shape[:-1], 4, 4))
+    u[..., 0, 0], u[..., 0, 1], u[..., 0, 2], u[..., 0, 3] = np.exp(d1), s12, s13, t1
+    u[..., 1, 1], u[..., 1, 2], u[..., 1, 3] = np.exp(d2), s23, t2
+    u[..., 2, 2], u[..., 2, 3] = np.exp(d3), t3
+    u[..., 3, 3] = 1.0
+    u *= scale[..., None, None]
+    j = u @ np.swapaxes(u, -1, -2)
+    sigma = j[..., :3, :3]
+    trace = np.trace(sigma, axis1=-2, axis2=-1)
+    inertia_o = trace[..., None, None] * np.eye(3) - sigma
+    out = np.empty(theta.shape)
+    out[..., 0] = j[..., 3, 3]
+    out[..., 1:4] = j[..., :3, 3]
+    out[..., 4:] = inertia_o[..., [0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]]
     return out
+
+
+def _derivatives(theta: np.ndarray) -> np.ndarray:
+    """(P, 10) -> (P, 10, 10): d parameters / d theta of each link, by central differences."""
+    step = 1e-6 * np.eye(10)
+    ahead = from_cholesky(theta[:, None, :] + step)  # (P, 10 perturbed, 10 parameters)
+    behind = from_cholesky(theta[:, None, :] - step)
+    return np.swapaxes(ahead - behind, 1, 2) / 2e-6
 
 
 def _consistent(p: np.ndarray) -> bool:
@@ -162,6 +182,7 @@ def identify(
     gravity: Sequence[float],
     effort_scale: np.ndarray,
     velocity_scale: np.ndarray | None = None,
+    scale_given: np.ndarray | None = None,
 ) -> Identified:
     """The inertial parameters (see the module docstring) from samples of free motion.
 
@@ -172,6 +193,9 @@ def identify(
         gravity: in the root frame, m/s^2.
         effort_scale: (n,) torque (N m; N) per effort unit, per joint: the units of the parameters.
         velocity_scale: (n,) the friction's smooth-sign scale per joint.
+        scale_given: (n,) bool, whether each joint's scale was given; where none was, the efforts
+            must look like torques (a scale fitted with the URDF's parameters within
+            :data:`UNITS` of 1): else nothing is identified, and the notes say what to give.
     """
     from scipy.optimize import least_squares
 
@@ -194,6 +218,7 @@ def identify(
     samples, count = e.shape
     # the joints' own unknowns, per row: offset, coulomb, viscous -> (T, r, r, 3); the efforts in
     # torque units by the given scales (the unit every term shares: see the module docstring)
+    given = np.zeros(n, dtype=bool) if scale_given is None else np.asarray(scale_given, dtype=bool)
     own = np.zeros((samples, count, count, UNKNOWNS))
     index = np.arange(count)
     own[:, index, index, 0] = 1.0
@@ -210,43 +235,105 @@ def identify(
         x, *_ = np.linalg.lstsq(own_flat, rhs, rcond=None)
         return x, (own_flat @ x - rhs).reshape(samples, count)
 
+    # The efforts' units: with the URDF's parameters, each joint's scale (torque per effort unit).
+    urdf_torque = (np.einsum("trlk,lk->tr", regressor, prior)).reshape(samples, count)
+    foreign = []
+    for k, j in enumerate(rows):
+        if given[j]:
+            continue
+        # the effort as the URDF's torque over a gain, plus offset and friction: where the torque explains
+        # most of the effort's spread, the gain tells the effort's unit
+        basis = np.column_stack([urdf_torque[:, k], np.ones(samples), sign[:, k], v[:, k]])
+        coefficients, *_ = np.linalg.lstsq(basis, e[:, k], rcond=None)
+        explained = float(np.std(basis[:, 0] * coefficients[0])) / max(float(np.std(e[:, k])), 1e-12)
+        gain = 1.0 / coefficients[0] if coefficients[0] != 0 else np.inf
+        if explained > 0.5 and not 1 / UNITS <= gain <= UNITS:
+            foreign.append((j, float(gain)))
+    if foreign:
+        names = [model.joint_names[j] for j in rows if not given[j]]
+        note = (
+            "inertial parameters not identified: the efforts of "
+            + ", ".join(f"{model.joint_names[j]} (about {gain:.3g} N m per unit)" for j, gain in foreign)
+            + " are not torques, and the effort scales set the parameters' units: give them ("
+            + " ".join(f"--effort-scale {name}=GAIN" for name in names)
+            + ", a datasheet's drive gains; or effort.scale in --params) and calibrate again"
+        )
+        nothing = np.zeros((0, 10))
+        return Identified([], nothing, nothing.astype(bool), np.full(count, np.nan), np.full(count, np.nan), 0, [note])
+    sigma_pi = np.stack([_prior_scale(p) for p in prior[links]])  # (P, 10)
+
+    def fit(use: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(link parameters, each joint's noise, the weighted own and link columns) on samples ``use``."""
+        chosen = np.repeat(use, count)
+        own_u, y_u, target_u = own_flat[chosen], y_flat[chosen], target[chosen]
+        used = int(np.count_nonzero(use))
+        x_urdf, *_ = np.linalg.lstsq(own_u, target_u + y_u @ prior[links].reshape(-1), rcond=None)
+        before_u = (own_u @ x_urdf - target_u - y_u @ prior[links].reshape(-1)).reshape(used, count)
+        # Pass 1, linear (pi unconstrained, the prior as ridge) for each joint's noise level.
+        noise = np.maximum(np.sqrt(np.mean(np.square(before_u), axis=0)), 1e-6)
+        design = np.hstack([own_u, -y_u]) / np.tile(noise, used)[:, None]
+        ridge = np.hstack([np.zeros((len(links) * 10, UNKNOWNS * count)), np.diag(1.0 / sigma_pi.reshape(-1))])
+        rhs = np.concatenate([target_u / np.tile(noise, used), prior[links].reshape(-1) / sigma_pi.reshape(-1)])
+        solution, *_ = np.linalg.lstsq(np.vstack([design, ridge]), rhs, rcond=None)
+        first = (design @ solution - rhs[: len(design)]).reshape(used, count) * noise
+        noise = np.maximum(np.sqrt(np.mean(np.square(first), axis=0)), 1e-6)
+        weights = 1.0 / np.tile(noise, used)
+        own_w, y_w, target_w = own_u * weights[:, None], y_u * weights[:, None], target_u * weights
+        # The data rows are linear in (joint unknowns, link parameters): their sum of squares is that of
+        # R z - Q^T t with [own, -y] = Q R, a few hundred rows in place of tens of thousands.
+        basis, upper = np.linalg.qr(np.hstack([own_w, -y_w]))
+        projected = basis.T @ target_w
+        own_r, y_r = upper[:, : UNKNOWNS * count], -upper[:, UNKNOWNS * count :]
+        # Pass 2: physically consistent links (log-Cholesky), every unknown at once.
+        x0 = np.concatenate([solution[: UNKNOWNS * count], np.concatenate([to_cholesky(p) for p in prior[links]])])
+
+        def residuals(x: np.ndarray) -> np.ndarray:
+            with np.errstate(over="ignore", invalid="ignore"):  # a trial step far out: rejected below
+                pi = from_cholesky(x[UNKNOWNS * count :].reshape(-1, 10))
+                data = own_r @ x[: UNKNOWNS * count] - y_r @ pi.reshape(-1) - projected
+                out = np.concatenate([data, ((pi - prior[links]) / sigma_pi).reshape(-1)])
+            return out if np.all(np.isfinite(out)) else np.full(len(out), 1e8)
+
+        def jacobian(x: np.ndarray) -> np.ndarray:
+            with np.errstate(over="ignore", invalid="ignore"):
+                blocks = np.nan_to_num(_derivatives(x[UNKNOWNS * count :].reshape(-1, 10)), posinf=0.0, neginf=0.0)
+            d_pi = np.zeros((len(links) * 10, len(links) * 10))
+            for k, block in enumerate(blocks):
+                d_pi[10 * k : 10 * k + 10, 10 * k : 10 * k + 10] = block
+            data = np.hstack([own_r, -y_r @ d_pi])
+            prior_rows = np.hstack(
+                [np.zeros((len(links) * 10, UNKNOWNS * count)), d_pi / sigma_pi.reshape(-1)[:, None]]
+            )
+            return np.vstack([data, prior_rows])
+
+        found = least_squares(residuals, x0, jac=jacobian, method="lm", x_scale="jac", max_nfev=MAX_EVALUATIONS)
+        return from_cholesky(found.x[UNKNOWNS * count :].reshape(-1, 10)), noise, own_w, y_w
+
+    # Held out: fitted on the first part of the samples, the identified parameters must predict the
+    # rest better than the URDF's (each with its own offsets and friction from the first part), or the
+    # URDF's are kept: a model the data cannot improve is not changed by their noise.
+    train = np.arange(samples) < int(TRAIN * samples)
+    pi_train, noise, _, _ = fit(train)
+
+    def held_out(pi: np.ndarray) -> float:
+        chosen = np.repeat(train, count)
+        rhs = target + y_flat @ pi.reshape(-1)
+        x, *_ = np.linalg.lstsq(own_flat[chosen], rhs[chosen], rcond=None)
+        rest = (own_flat[~chosen] @ x - rhs[~chosen]).reshape(-1, count) / noise
+        return float(np.mean(np.square(rest)))
+
+    urdf_score, identified_score = held_out(prior[links]), held_out(pi_train)
     _, before = linear_fit(prior[links])
     residual_before = np.sqrt(np.mean(np.square(before), axis=0))
-    # Pass 1, linear (pi unconstrained, the prior as ridge) for each joint's noise level.
-    sigma_pi = np.stack([_prior_scale(p) for p in prior[links]])  # (P, 10)
-    noise = np.maximum(residual_before, 1e-6)
-    design = np.hstack([own_flat, -y_flat]) / np.repeat(noise[None, :], samples, axis=0).reshape(-1, 1)
-    ridge = np.hstack([np.zeros((len(links) * 10, UNKNOWNS * count)), np.diag(1.0 / sigma_pi.reshape(-1))])
-    stacked = np.vstack([design, ridge])
-    rhs = np.concatenate([target / np.tile(noise, samples), prior[links].reshape(-1) / sigma_pi.reshape(-1)])
-    solution, *_ = np.linalg.lstsq(stacked, rhs, rcond=None)
-    first = (design @ solution - rhs[: len(design)]).reshape(samples, count) * noise
-    noise = np.maximum(np.sqrt(np.mean(np.square(first), axis=0)), 1e-6)
-    weights = 1.0 / np.tile(noise, samples)
-    own_w, y_w, target_w = own_flat * weights[:, None], y_flat * weights[:, None], target * weights
-    # Pass 2: physically consistent links (log-Cholesky), every unknown at once.
-    theta0 = np.concatenate([to_cholesky(p) for p in prior[links]])
-    x0 = np.concatenate([solution[: UNKNOWNS * count], theta0])
-
-    def parameters(theta: np.ndarray) -> np.ndarray:
-        return np.stack([from_cholesky(t) for t in theta.reshape(-1, 10)])
-
-    def residuals(x: np.ndarray) -> np.ndarray:
-        pi = parameters(x[UNKNOWNS * count :])
-        data = own_w @ x[: UNKNOWNS * count] - y_w @ pi.reshape(-1) - target_w
-        return np.concatenate([data, ((pi - prior[links]) / sigma_pi).reshape(-1)])
-
-    def jacobian(x: np.ndarray) -> np.ndarray:
-        blocks = [_derivative(t) for t in x[UNKNOWNS * count :].reshape(-1, 10)]
-        d_pi = np.zeros((len(links) * 10, len(links) * 10))
-        for k, block in enumerate(blocks):
-            d_pi[10 * k : 10 * k + 10, 10 * k : 10 * k + 10] = block
-        data = np.hstack([own_w, -y_w @ d_pi])
-        prior_rows = np.hstack([np.zeros((len(links) * 10, UNKNOWNS * count)), d_pi / sigma_pi.reshape(-1)[:, None]])
-        return np.vstack([data, prior_rows])
-
-    found = least_squares(residuals, x0, jac=jacobian, method="trf", x_scale="jac", max_nfev=200)
-    pi = parameters(found.x[UNKNOWNS * count :])
+    if not identified_score <= BETTER * urdf_score:
+        note = (
+            f"inertial parameters kept as the URDF's: identified on the first {TRAIN:.0%} of the samples, they "
+            f"predict the rest no better ({identified_score:.3g} against {urdf_score:.3g}, the noise-weighted mean "
+            "square of the torque equation's residual)"
+        )
+        nothing = np.zeros((0, 10))
+        return Identified([], nothing, nothing.astype(bool), residual_before, residual_before, 0, [note])
+    pi, noise, own_w, y_w = fit(np.ones(samples, dtype=bool))
     _, after = linear_fit(pi)
     # What the data told: the posterior's standard deviation of each parameter against the prior's.
     information = y_w.T @ y_w - y_w.T @ own_w @ np.linalg.pinv(own_w.T @ own_w) @ own_w.T @ y_w

@@ -224,7 +224,7 @@ def observe_raw(model: RobotModel, settings: NodeSettings, raw: RawStates, state
     external, filtered = observe(model, raw, state.effort, state.observer)
     contact = None
     if state.contact is not None:
-        slack = state.effort.static_friction(filtered)
+        slack = settings.contact_static_friction * state.effort.static_friction(filtered)
         if raw.single:
             contact = state.contact.update(raw.stamps, external, slack) if np.isfinite(external).any() else None
         else:

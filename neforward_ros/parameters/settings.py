@@ -57,6 +57,7 @@ class NodeSettings:
         contact_thresholds: joint name -> |external torque| threshold; empty: no ~/contact.
         contact_debounce: s.
         contact_release: in contact, the fraction of their thresholds the joints must stay over.
+        contact_static_friction: the fraction of the Coulomb friction added to the thresholds near rest.
         contact_link: the link of ~/contact_wrench, or "" for none.
         base_source: "fixed", "imu" or "odometry".
         base_topic: its topic (relative name).
@@ -93,6 +94,7 @@ class NodeSettings:
     contact_thresholds: Mapping[str, float] = field(default_factory=dict)
     contact_debounce: float = 0.02
     contact_release: float = 1.0
+    contact_static_friction: float = 1.0
     contact_link: str = ""
     base_source: str = "fixed"
     base_topic: str = ""
@@ -229,6 +231,9 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         raise InputError(
             f"parameter base.max_delay must be a positive number of seconds, got {merged['base.max_delay']}"
         )
+    if not 0.0 <= merged["contact.static_friction"] <= 1.0:
+        value = merged["contact.static_friction"]
+        raise InputError(f"parameter contact.static_friction must be in [0, 1], got {value}")
     if not 0.0 < merged["contact.release"] <= 1.0:
         raise InputError(f"parameter contact.release must be in (0, 1], got {merged['contact.release']}")
     if not merged["contact.debounce"] >= 0.0:
@@ -277,6 +282,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         contact_thresholds=contact_thresholds,
         contact_debounce=merged["contact.debounce"],
         contact_release=merged["contact.release"],
+        contact_static_friction=merged["contact.static_friction"],
         contact_link=merged["contact.link"],
         base_source=merged["base.source"],
         base_topic=merged["base.topic"] or {"imu": "imu", "odometry": "odom"}.get(merged["base.source"], ""),

@@ -240,6 +240,13 @@ PARAMETERS: tuple[Parameter, ...] = (
         "watched joint for contact.debounce, the contact ends (1: no hysteresis).",
     ),
     Parameter(
+        "contact.static_friction",
+        "double",
+        1.0,
+        "observer: the fraction of each joint's Coulomb (and Stribeck) friction added to its threshold near rest, "
+        "where friction can hold up to that much (0: none; neforward calibrate's thresholds cover rest).",
+    ),
+    Parameter(
         "contact.link",
         "string",
         "",
