@@ -30,7 +30,14 @@ from neforward_ros.wire.rostypes import typestore
 
 GAZ = (0.175, 0.035, 0.039, 0.031, 0.148, 0.138, 0.242)
 UR_GAINS = (10.0, 10.6956, 8.4566, 9.0029, 9.48, 10.1232)
-UR_JOINTS = ("shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint")
+UR_JOINTS = (
+    "shoulder_pan_joint",
+    "shoulder_lift_joint",
+    "elbow_joint",
+    "wrist_1_joint",
+    "wrist_2_joint",
+    "wrist_3_joint",
+)
 UR_CALIBRATION = ("ur-20_02_12-50sec_12harm", "ur-20_02_19_14harm50sec", "ur-20_02_19_15harm50sec")
 
 
@@ -129,7 +136,9 @@ def main() -> None:
     parser.add_argument("--realdata", default=str(Path(__file__).resolve().parents[2] / "shared" / "realdata"))
     parser.add_argument("--gains", action="store_true", help="give the UR10e's drive gains as effort scales")
     parser.add_argument("--only", choices=("panda", "ur10e"))
-    parser.add_argument("--keep", metavar="DIR", help="write the recordings and params here (an empty folder) and keep them")
+    parser.add_argument(
+        "--keep", metavar="DIR", help="write the recordings and params here (an empty folder) and keep them"
+    )
     args = parser.parse_args()
     realdata = Path(args.realdata)
     if not realdata.is_dir():
