@@ -342,16 +342,20 @@ def test_random_message_sequences_never_raise_never_emit_nan_for_ready_joints(se
         ["a", "b", "c"], wrap=[False, True, False], settings=StreamSettings(mode=mode, method=method, lag=0.004)
     )
     stamp = EPOCH_NS
+    newest = stamp
     out = []
     for step_ms, names, values, velocity_kind in sequence:
         stamp += step_ms * 1_000_000
+        newest = max(newest, stamp)
         positions = (values * 4)[: len(names)] if values else [0.0] * len(names)
         if len(values) == 1:
             positions = positions[:-1]  # sometimes a length mismatch
         velocities = {"none": [], "same": list(reversed(positions)), "short": positions[:1]}[velocity_kind]
         out += estimator.update(stamp, names, positions, velocities)
-    # Then, after more than max_gap, clean input: a constant acceleration of 2 on every joint.
-    restart = max([stamp, *(e.stamp_ns for e in out)]) + 600_000_000
+    # Then, after more than max_gap, clean input: a constant acceleration of 2 on every joint. More than
+    # max_gap after the newest stamp sent: the stamps may have gone back since (once this took the last
+    # one, and a joint's history went on across a 0.48 s silence and a jump, as it should).
+    restart = max([newest, *(e.stamp_ns for e in out)]) + 600_000_000
     clean = []
     for k in range(150):  # 0.3 s: the supports (0.2 s) are covered from 0.2 s on
         tk = k * 0.002
