@@ -153,8 +153,11 @@ def stream_arm(peer: Peer, simulated, rate: float, settle: float = 0.5) -> tuple
         nonlocal external
         contact.extend((now, cdr_bool(b)) for b in peer.take("/neforward/contact"))
         if watched:
-            external += peer.take("/neforward/external_torques")
+            arrived = peer.take("/neforward/external_torques")
+            external += arrived
+            arrivals.extend((now, header_stamp(b)) for b in arrived)
 
+    arrivals.clear()
     sent = np.zeros(len(simulated.stamps))
     start = time.monotonic()
     for k, stamp in enumerate(simulated.stamps.tolist()):
@@ -172,6 +175,21 @@ def stream_arm(peer: Peer, simulated, rate: float, settle: float = 0.5) -> tuple
         peer.wait(0.05)
         collect()
     return sent, contact, external
+
+
+arrivals: list[tuple[float, int]] = []
+"""(arrival time, header stamp ns) of the external torques the last :func:`stream_arm` received."""
+
+
+def header_stamp(data: bytes) -> int:
+    """A stamped message's header stamp, ns (CDR: the encapsulation, then sec and nanosec)."""
+    return int.from_bytes(data[4:8], "little", signed=True) * 10**9 + int.from_bytes(data[8:12], "little")
+
+
+def processed_by(stamp: int) -> float:
+    """When the node's external torque of the first sample at or after ``stamp`` arrived (how far
+    behind the stream the node is then, on a loaded machine), from the last :func:`stream_arm`."""
+    return min((t for t, s in arrivals if s >= stamp), default=float("inf"))
 
 
 def cdr_bool(data: bytes) -> bool:

@@ -22,7 +22,7 @@ import numpy as np
 from neforward_ros.dds.loopback import write_config
 from neforward_ros.interface import topics
 
-from dds_peer import NodeProcess, Peer, loopback_env, stream_arm
+from dds_peer import NodeProcess, Peer, loopback_env, processed_by, stream_arm
 from test_contact import SEED, arm, arm_urdf, neforward
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
@@ -63,5 +63,9 @@ def test_contact_live_over_dds(tmp_path) -> None:
     rise, fall = rises[0] - sent[push_start], falls[0] - sent[push_end]
     print(f"live: contact {rise * 1e3:.1f} ms after the push's first sample was sent, released "
           f"{fall * 1e3:.1f} ms after its last")  # fmt: skip
-    assert 0 < rise < 0.5 and 0 < fall < 0.5  # loose: a loaded machine delays the node (see the docstring)
+    # loose, and counted from when the node had processed those samples (their external torques
+    # arrived): with every core busy, the node may run 0.3-0.7 s behind the stream it is sent
+    behind_start = max(0.0, processed_by(int(pushed.stamps[push_start])) - sent[push_start])
+    behind_end = max(0.0, processed_by(int(pushed.stamps[push_end])) - sent[push_end])
+    assert 0 < rise < 0.5 + behind_start and 0 < fall < 0.5 + behind_end, (rise, fall, behind_start, behind_end)
     assert len(external) >= len(pushed.stamps) - 200  # every stamp after the observer's warm-up

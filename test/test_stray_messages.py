@@ -150,11 +150,13 @@ def test_a_message_of_tens_of_thousands_of_names_costs_about_what_decoding_it_co
     data = cdr.encode("sensor_msgs/msg/JointState", message)
     estimator = StreamingEstimator(NAMES, log=LogRecorder())
     decode, handle = [], []
-    for k in range(5):  # interleaved, the best of each: a loaded machine slows both alike
+    for k in range(9):  # interleaved, the best of each: a loaded machine slows both alike
         start = time.perf_counter()
         _, got_names, positions, velocities, efforts = cdr.decode_joint_state(data)
         decode.append(time.perf_counter() - start)
         start = time.perf_counter()
         estimator.update(EPOCH_NS + k, [*got_names[:-1], f"other_{k}"], positions, velocities, efforts)
         handle.append(time.perf_counter() - start)
-    assert min(handle) <= 10 * min(decode) + 0.005, (min(handle), min(decode))
+    # a cost that grows with the square of the names takes seconds here; the constant is a loaded
+    # machine's time slices (with every core busy, the best of nine took 10 ms, idle 1-3 ms)
+    assert min(handle) <= 10 * min(decode) + 0.05, (min(handle), min(decode))
