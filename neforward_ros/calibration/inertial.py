@@ -46,6 +46,8 @@ TOLD = 0.5
 """A parameter is identified where the data bring its standard deviation below this fraction of the prior's."""
 VELOCITY_SCALE = 0.01
 """rad/s: the friction's smooth sign, tanh(q̇ / this), where the prior gives none."""
+MIN_SAMPLES = 100
+"""The fewest samples the identification is made on."""
 TRAIN = 0.7
 """The identification is first made on this fraction of the samples (the first) and judged on the rest."""
 BETTER = 0.8
@@ -209,6 +211,12 @@ def identify(
     moving = model.driving_columns.any(axis=1) & np.array([_consistent(p) for p in prior])
     links = np.flatnonzero(moving)
     rows = np.flatnonzero(measured)
+    if not len(links) or not len(rows) or len(q) < MIN_SAMPLES:
+        why = "no moving link has a mass and an inertia in the URDF" if not len(links) else "too few samples"
+        nothing = np.zeros((0, 10))
+        count = len(rows)
+        return Identified([], nothing, nothing.astype(bool), np.full(count, np.nan), np.full(count, np.nan), 0,
+                          [f"inertial parameters not identified: {why}"])  # fmt: skip
     regressor = torque_regressor(model, q, qd, qdd, gravity)[:, rows]  # (T, r, L, 10)
     fixed = np.einsum("trlk,lk->tr", regressor[:, :, ~moving], prior[~moving])
     y_links = regressor[:, :, links]  # (T, r, P, 10)
