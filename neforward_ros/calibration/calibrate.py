@@ -129,7 +129,18 @@ def calibrate(
     measured = np.ones(len(names), dtype=bool)
     measured[held] = False
     original = dict(values)  # "before": the parameters given, the URDF's inertias
-    here = _momentum_fit(recordings, options, model, measured, held, stribeck, payload, progress)
+    # The recordings' measured samples, assembled once: they do not depend on the model's inertias.
+    raws: list[tuple[RawStates | None, bool | None]] = []
+    samples: list[RawStates] = []
+    for k, recording in enumerate(recordings):
+        progress("preparing", k / len(recordings))
+        assembled, _, velocities = raw_states(recording, options)
+        raws.append((assembled, velocities))
+        raw = _measured(recording, options, assembled, velocities)
+        if raw is not None:
+            samples.append(raw)
+    progress("preparing", 1.0)
+    here = _momentum_fit(samples, options, model, measured, held, stribeck, payload, progress)
     identified = None
     if inertia and payload is None and measured.any():
         # The inertial parameters, with the friction's shapes the momentum fit found; then that fit
@@ -141,9 +152,9 @@ def calibrate(
             values = {**values, **identified.values()}
             options = BagOptions.from_parameters(values, urdf=urdf, joint_states_topic=joint_states_topic)
             model = options.settings.model_of(recordings[0].model)
-            here = _momentum_fit(recordings, options, model, measured, held, stribeck, payload, progress)
+            here = _momentum_fit(samples, options, model, measured, held, stribeck, payload, progress)
         progress("inertia", 1.0)
-    parts, raws, data, fits, prior = here.parts, here.raws, here.data, here.fits, here.prior
+    parts, data, fits, prior = here.parts, here.data, here.fits, here.prior
     stamps, efforts, qd, runs = here.stamps, here.efforts, here.qd, here.runs
     gravity_force = -np.asarray(options.settings.gravity, dtype=float)
     found_payload = None
@@ -300,7 +311,6 @@ class _Momentum:
     """The momentum fit of every joint (:mod:`.fit`) and what it was made of."""
 
     parts: list[Any]
-    raws: list[tuple[RawStates | None, bool | None]]
     stamps: list[np.ndarray]
     efforts: list[np.ndarray]
     qd: list[np.ndarray]
@@ -311,7 +321,7 @@ class _Momentum:
 
 
 def _momentum_fit(
-    recordings: list[Recording],
+    samples: list[RawStates],
     options: BagOptions,
     model: Any,
     measured: np.ndarray,
@@ -320,24 +330,17 @@ def _momentum_fit(
     payload: str | None,
     progress: Callable[[str, float], None],
 ) -> _Momentum:
-    """Each joint's scale, offset and friction on the momentum equation, with this model."""
+    """Each joint's scale, offset and friction on the momentum equation, with this model, on the
+    recordings' measured ``samples``."""
     names = model.joint_names
     prior_settings = options.settings
     prior = ComputeState.new(model, prior_settings).effort
     gravity_force = -np.asarray(prior_settings.gravity, dtype=float)
     parts = []
-    raws: list[tuple[RawStates | None, bool | None]] = []
-    for k, recording in enumerate(recordings):
-        progress("preparing", k / len(recordings))
-        assembled, _, velocities = raw_states(recording, options)
-        raws.append((assembled, velocities))
-        raw = _measured(recording, options, assembled, velocities)
-        if raw is None:
-            continue
+    for raw in samples:
         known = np.isfinite(raw.efforts[:, measured]).all(axis=1) if measured.any() else np.zeros(len(raw), bool)
         values_k = momentum_values(model, raw.q, raw.qd, gravity_force)
         parts.append((raw, *_split(values_k), known))
-    progress("preparing", 1.0)
     if not any(known.any() for *_, known in parts):
         raise InputError("no joint state with every joint's position and effort: nothing to calibrate on")
     stamps, momentum, rest, efforts, qd, runs, offset = [], [], [], [], [], [], 0
@@ -358,7 +361,7 @@ def _momentum_fit(
     # A payload's torques and the effort scales trade off: with --payload the scales are the given ones
     # (a calibration without the payload first, then this one with --params of it).
     fits = fit_joints(data, names, prior, stribeck=stribeck, scale=payload is None, held=held)
-    return _Momentum(parts, raws, stamps, efforts, qd, runs, data, fits, prior)
+    return _Momentum(parts, stamps, efforts, qd, runs, data, fits, prior)
 
 
 SMOOTHING = 0.02
