@@ -35,7 +35,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from neforward_ros.kinematics.regressor import link_parameters, split_parameters, torque_regressor
+from neforward_ros.kinematics.regressor import (
+    UPPER,
+    link_parameters,
+    origin_inertia,
+    split_parameters,
+    torque_regressor,
+)
 from neforward_ros.model import RobotModel
 
 MAX_SAMPLES = 3000
@@ -86,7 +92,7 @@ class Identified:
     def values(self) -> dict[str, list]:
         """The ``inertial.*`` parameters (rounded to 6 significant digits)."""
         mass, com, inertia = split_parameters(self.parameters)
-        six = inertia[:, [0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]]
+        six = inertia[(slice(None), *UPPER)]
 
         def rounded(values: np.ndarray) -> list[float]:
             return [float(f"{v:.6g}") for v in np.ravel(values)]
@@ -100,7 +106,8 @@ class Identified:
 
 
 def _pseudo_inertia(p: np.ndarray) -> np.ndarray:
-    inertia_o = np.array([[p[4], p[5], p[6]], [p[5], p[7], p[8]], [p[6], p[8], p[9]]])
+    """A link's parameters -> its 4x4 pseudo-inertia [[Sigma, h], [h^T, m]], Sigma = tr(I_o)/2 1 - I_o."""
+    inertia_o = origin_inertia(p)
     sigma = 0.5 * np.trace(inertia_o) * np.eye(3) - inertia_o
     out = np.zeros((4, 4))
     out[:3, :3], out[:3, 3], out[3, :3], out[3, 3] = sigma, p[1:4], p[1:4], p[0]
@@ -108,9 +115,14 @@ def _pseudo_inertia(p: np.ndarray) -> np.ndarray:
 
 
 def _from_pseudo(j: np.ndarray) -> np.ndarray:
-    sigma = j[:3, :3]
-    inertia_o = np.trace(sigma) * np.eye(3) - sigma
-    return np.array([j[3, 3], *j[:3, 3], *inertia_o[[0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]]])
+    """(..., 4, 4) pseudo-inertias -> (..., 10) parameters."""
+    sigma = j[..., :3, :3]
+    inertia_o = np.trace(sigma, axis1=-2, axis2=-1)[..., None, None] * np.eye(3) - sigma
+    out = np.empty((*j.shape[:-2], 10))
+    out[..., 0] = j[..., 3, 3]
+    out[..., 1:4] = j[..., :3, 3]
+    out[..., 4:] = inertia_o[(..., *UPPER)]
+    return out
 
 
 def to_cholesky(p: np.ndarray) -> np.ndarray:
@@ -139,15 +151,7 @@ def from_cholesky(theta: np.ndarray) -> np.ndarray:
     u[..., 2, 2], u[..., 2, 3] = np.exp(d3), t3
     u[..., 3, 3] = 1.0
     u *= scale[..., None, None]
-    j = u @ np.swapaxes(u, -1, -2)
-    sigma = j[..., :3, :3]
-    trace = np.trace(sigma, axis1=-2, axis2=-1)
-    inertia_o = trace[..., None, None] * np.eye(3) - sigma
-    out = np.empty(theta.shape)
-    out[..., 0] = j[..., 3, 3]
-    out[..., 1:4] = j[..., :3, 3]
-    out[..., 4:] = inertia_o[..., [0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]]
-    return out
+    return _from_pseudo(u @ np.swapaxes(u, -1, -2))
 
 
 def _derivatives(theta: np.ndarray) -> np.ndarray:
@@ -169,7 +173,7 @@ def _consistent(p: np.ndarray) -> bool:
 def _prior_scale(p: np.ndarray) -> np.ndarray:
     """Per parameter, the prior's standard deviation: half the link's mass, mass x length, mass x length^2."""
     m = max(float(p[0]), 1e-3)
-    inertia_o = np.array([[p[4], p[5], p[6]], [p[5], p[7], p[8]], [p[6], p[8], p[9]]])
+    inertia_o = origin_inertia(p)
     length = max(float(np.linalg.norm(p[1:4])) / m, float(np.sqrt(max(np.trace(inertia_o), 0.0) / (2 * m))), 0.02)
     return PRIOR * np.array([m, *(3 * [m * length]), *(6 * [m * length**2])])
 

@@ -30,6 +30,16 @@ PARAMETERS = ("m", "mcx", "mcy", "mcz", "ixx", "ixy", "ixz", "iyy", "iyz", "izz"
 """The order of a link's ten inertial parameters."""
 
 
+UPPER = ([0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2])
+"""The (row, column) indices of (ixx, ixy, ixz, iyy, iyz, izz) in a 3x3 inertia."""
+
+
+def origin_inertia(parameters: np.ndarray) -> np.ndarray:
+    """(..., 10) -> (..., 3, 3): the rotational inertia about the link origin the parameters hold."""
+    ixx, ixy, ixz, iyy, iyz, izz = (parameters[..., 4 + k] for k in range(6))
+    return np.stack([np.stack([ixx, ixy, ixz], -1), np.stack([ixy, iyy, iyz], -1), np.stack([ixz, iyz, izz], -1)], -2)
+
+
 def skew(v: np.ndarray) -> np.ndarray:
     """(..., 3) -> (..., 3, 3) cross-product matrices, ``skew(a) @ b = a x b``."""
     out = np.zeros((*v.shape, 3))
@@ -58,7 +68,7 @@ def link_parameters(model: RobotModel) -> np.ndarray:
         inertia_c = np.asarray(model.inertia_in_link[i], dtype=float).reshape(3, 3) if model.inertia_in_link else 0
         inertia_o = inertia_c + m * (float(c @ c) * np.eye(3) - np.outer(c, c))
         out[i, 0], out[i, 1:4] = m, m * c
-        out[i, 4:] = inertia_o[[0, 0, 0, 1, 1, 2], [0, 1, 2, 1, 2, 2]]
+        out[i, 4:] = inertia_o[UPPER]
     return out
 
 
@@ -69,10 +79,7 @@ def split_parameters(parameters: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     h = parameters[..., 1:4]
     safe = np.where(m > 0, m, 1.0)
     c = np.where((m > 0)[..., None], h / safe[..., None], 0.0)
-    ixx, ixy, ixz, iyy, iyz, izz = (parameters[..., 4 + k] for k in range(6))
-    inertia_o = np.stack(
-        [np.stack([ixx, ixy, ixz], -1), np.stack([ixy, iyy, iyz], -1), np.stack([ixz, iyz, izz], -1)], -2
-    )
+    inertia_o = origin_inertia(parameters)
     cc = np.einsum("...i,...i->...", c, c)
     shift = m[..., None, None] * (cc[..., None, None] * np.eye(3) - np.einsum("...i,...j->...ij", c, c))
     return m, c, inertia_o - shift
