@@ -9,12 +9,12 @@ the parameters used most offline. Precedence, lowest first: the params file, the
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from neforward_ros.bag.options import STORAGES
 from neforward_ros.errors import InputError
+from neforward_ros.parameters.files import joint_numbers
 
 if TYPE_CHECKING:
     pass
@@ -159,33 +159,17 @@ def _shorthand_values(args: argparse.Namespace) -> dict[str, Any]:
     if args.gravity is not None:
         values["gravity"] = list(args.gravity)
     if args.hold:
-        held = _per_joint(args.hold, "--hold")
+        held = joint_numbers(args.hold, "--hold")
         values["hold.joint_names"], values["hold.positions"] = list(held), [v[0] for v in held.values()]
     if args.effort:
-        efforts = _per_joint(args.effort, "--effort", width=2)
+        efforts = joint_numbers(args.effort, "--effort", width=2)
         values["effort.joint_names"] = list(efforts)
         values["effort.scale"] = [v[0] for v in efforts.values()]
         values["effort.offset"] = [v[1] if len(v) > 1 else 0.0 for v in efforts.values()]
     if args.contact:
-        thresholds = _per_joint(args.contact, "--contact")
+        thresholds = joint_numbers(args.contact, "--contact")
         values["contact.joint_names"], values["contact.thresholds"] = (
             list(thresholds),
             [v[0] for v in thresholds.values()],
         )
     return values
-
-
-def _per_joint(items: Sequence[str], option: str, width: int = 1) -> dict[str, list[float]]:
-    """JOINT=V (or V,W with width 2) items as joint -> numbers."""
-    out = {}
-    for item in items:
-        name, _, value = item.partition("=")
-        try:
-            numbers = [float(v) for v in value.split(",")]
-        except ValueError:
-            numbers = []
-        if not name.strip() or not 1 <= len(numbers) <= width:
-            shape = "JOINT=NUMBER" if width == 1 else "JOINT=NUMBER[,NUMBER]"
-            raise InputError(f"{option} takes {shape}, got {item!r}")
-        out[name.strip()] = numbers
-    return out

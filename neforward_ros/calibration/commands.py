@@ -49,7 +49,7 @@ def run_calibrate(args: argparse.Namespace) -> int:
     from neforward_ros.bag.report import Progress
     from neforward_ros.calibration.calibrate import calibrate
     from neforward_ros.calibration.params_file import params_yaml
-    from neforward_ros.parameters.files import command_line_parameters, load_params_file
+    from neforward_ros.parameters.files import command_line_parameters, joint_numbers, load_params_file
 
     output = Path(args.output)
     if output.exists():
@@ -65,15 +65,10 @@ def run_calibrate(args: argparse.Namespace) -> int:
     if args.effort_scale:
         scales = dict(zip(values.get("effort.joint_names", ()), values.get("effort.scale", ()), strict=False))
         offsets = dict(zip(values.get("effort.joint_names", ()), values.get("effort.offset", ()), strict=False))
-        for item in args.effort_scale:
-            name, _, text = item.partition("=")
-            try:
-                gain = float(text)
-            except ValueError:
-                gain = float("nan")
-            if not name.strip() or not gain > 0.0:
-                raise InputError(f"--effort-scale takes JOINT=GAIN with a positive gain, got {item!r}")
-            scales[name.strip()] = gain
+        for name, (gain,) in joint_numbers(args.effort_scale, "--effort-scale").items():
+            if not gain > 0.0:
+                raise InputError(f"--effort-scale takes JOINT=GAIN with a positive gain, got {name}={gain:g}")
+            scales[name] = gain
         values["effort.joint_names"] = list(scales)
         values["effort.scale"] = [float(v) for v in scales.values()]
         if offsets:

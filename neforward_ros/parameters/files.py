@@ -89,3 +89,24 @@ def _flatten(mapping: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
         else:
             out[f"{prefix}{key}"] = value
     return out
+
+
+def joint_numbers(items: Sequence[str], option: str, width: int = 1) -> dict[str, list[float]]:
+    """Command-line JOINT=V (or V,W with width 2) items (``--hold``, ``--effort``, ``--effort-scale`` ...)
+    as joint -> numbers.
+
+    Raises:
+        InputError: an item that is not JOINT=NUMBER (or JOINT=NUMBER[,NUMBER]), naming ``option``.
+    """
+    out = {}
+    for item in items:
+        name, _, value = item.partition("=")
+        try:
+            numbers = [float(v) for v in value.split(",")]
+        except ValueError:
+            numbers = []
+        if not name.strip() or not 1 <= len(numbers) <= width:
+            shape = "JOINT=NUMBER" if width == 1 else "JOINT=NUMBER[,NUMBER]"
+            raise InputError(f"{option} takes {shape}, got {item!r}")
+        out[name.strip()] = numbers
+    return out
