@@ -37,7 +37,7 @@ def test_a_kept_model_equals_the_model_read(path) -> None:
     assert load_model(data.decode()) == built  # the same text as a robot_description
 
 
-def test_the_root_link_and_every_byte_are_part_of_the_key(caplog) -> None:
+def test_the_root_link_and_every_byte_are_part_of_the_key() -> None:
     path = TEST_ROBOTS["panda"]
     whole = load_model(path)
     sub = load_model(path, root_link="panda_link3")
