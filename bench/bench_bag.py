@@ -138,8 +138,10 @@ def long_run(folder: Path, repeats: int) -> None:
           f"{', '.join(f'{x:.2f}' for x in warm)}")  # fmt: skip
     print(f"`neforward bag`, cold: {c:.2f} s, ratio {c / a:.2f} (target <= 1.8); runs: "
           f"{', '.join(f'{x:.2f}' for x in cold)}")  # fmt: skip
-    print(f"link accelerations on the last minute against the exact ones: largest error {100 * error:.2g} % of "
-          "the largest acceleration")
+    print(
+        f"link accelerations on the last minute against the exact ones: largest error {100 * error:.2g} % of "
+        "the largest acceleration"
+    )
 
 
 def neforward_bag(path: Path, output: Path) -> float:

@@ -176,11 +176,12 @@ def expected_outputs(stamps: np.ndarray, lag_ns: int) -> int:
     return int(np.sum(stamps + lag_ns <= reach(stamps, lag_ns)[-1]))
 
 
-def warm_up_ns(mode: str) -> int:
-    """How long after the first input the node's default estimator in this mode gives its first estimate."""
+def warm_up_ns(mode: str, method: str = "polyfit") -> int:
+    """How long after the first input the node's estimator (this method, its defaults) in this mode
+    gives its first estimate."""
     from neforward_ros.estimation.settings import StreamSettings
 
-    return round(StreamSettings(mode=mode).support.before * 1e9)
+    return round(StreamSettings(method=method, mode=mode).support.before * 1e9)
 
 
 def summary(stamps: np.ndarray, received: list[tuple[int, int]], lag_ns: int, warm_up: int) -> tuple:

@@ -13,7 +13,7 @@ floor is an rclpy node that publishes every JointState it takes straight back, w
 It also prints what building one link_states message costs the two ways the rclpy node could do it:
 as an rclpy message object, serialized by rclpy, or with neforward_ros.cdr's encoder (what it does).
 
-Usage: python bench/bench_ros.py [--seconds 3] [--rates 250,500,1000,2000]
+Usage: python bench/bench_ros.py [--seconds 3] [--rates 250,500,1000,2000] [--method kalman] [--robots arm]
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ def main() -> None:
     parser.add_argument("--robots", default="arm,humanoid", help="which robots (comma-separated)")
     parser.add_argument("--modes", default="fixed_lag,causal")
     parser.add_argument("--fixed-window", action="store_true", help="estimator.adaptive false (the fixed window)")
+    parser.add_argument("--method", default="polyfit", help="estimator.method (polyfit, kalman)")
     parser.add_argument("--depth", type=int, default=500, help="the node's qos_depth (its default: 500)")
     args = parser.parse_args()
     if not os.environ.get("NEFORWARD_ROS_PYTHON") and (ROOT / ".venv-ros" / "bin" / "python").exists():
@@ -80,11 +81,12 @@ def main() -> None:
             continue
         names = ",".join(load_model(path).joint_names)
         for mode in args.modes.split(","):
-            lag_ns = round(StreamSettings(mode=mode).effective_lag * 1e9)
+            lag_ns = round(StreamSettings(method=args.method, mode=mode).effective_lag * 1e9)
             params = directory / f"{path.stem}-{mode}.yaml"
             params.write_text(
                 f"/**/neforward:\n  ros__parameters:\n    qos_depth: {args.depth}\n    estimator:\n"
-                f"      mode: {mode}\n      adaptive: {'false' if args.fixed_window else 'true'}\n"
+                f"      mode: {mode}\n      method: {args.method}\n"
+                f"      adaptive: {'false' if args.fixed_window else 'true'}\n"
                 f"    robot_description: {json.dumps(path.read_text())}\n"
             )
             for rate in (float(r) for r in args.rates.split(",")):
@@ -111,7 +113,8 @@ def main() -> None:
                     stamps = np.array(measured["stamps"], dtype=np.int64)
                     received = [(int(a), int(b)) for a, b in measured["received"]]
                     lag = lag_ns if what == "node" else 0
-                    results[what] = summary(stamps, received, lag, warm_up_ns(mode) if what == "node" else 0)
+                    warm_up = warm_up_ns(mode, args.method) if what == "node" else 0
+                    results[what] = summary(stamps, received, lag, warm_up)
                 labels = [f"{label.split()[0]:<10}", f"{mode:<10}", f"{rate:>6.0f}"]
                 print_row(labels, results["floor"], results["node"])
 

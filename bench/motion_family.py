@@ -5,7 +5,9 @@
 - trapezoidal-velocity moves (acceleration limited: the acceleration jumps) with dwells;
 - a legged gait's joint profile: a 1-2 Hz stride and its first five harmonics.
 
-:func:`make` samples one at a rate, with +-5 % stamp jitter, through an encoder of some bits.
+:func:`make` samples one at a rate, with +-5 % stamp jitter, through an encoder of some bits; with
+``repeats``, that share of the samples repeats the previous sample's positions under its own stamp
+(a driver that publishes before the encoder has a new reading).
 """
 
 from __future__ import annotations
@@ -80,7 +82,7 @@ def gait(t, rng, n=3, f=None):
     return q, qdd
 
 
-def make(kind: str, rate: float, bits: int, seed: int, seconds: float = 8.0, joints: int = 3):
+def make(kind: str, rate: float, bits: int, seed: int, seconds: float = 8.0, joints: int = 3, repeats: float = 0.0):
     """(t s, measured q, true q, true qdd), each (T, joints) but t (T,)."""
     rng = np.random.default_rng(seed)
     t = (np.arange(int(seconds * rate)) + rng.uniform(-0.05, 0.05, int(seconds * rate))) / rate
@@ -93,4 +95,10 @@ def make(kind: str, rate: float, bits: int, seed: int, seconds: float = 8.0, joi
     else:
         q, qdd = gait(t, rng, joints)
     step = 2 * np.pi / 2**bits
-    return t, np.round(q / step) * step, q, qdd
+    measured = np.round(q / step) * step
+    if repeats:
+        again = np.flatnonzero(np.random.default_rng(seed + 1).random(len(t)) < repeats)
+        again = again[again > 0]
+        for k in again:  # in order: a run of repeats holds the last new reading
+            measured[k] = measured[k - 1]
+    return t, measured, q, qdd

@@ -307,33 +307,16 @@ def test_motion_model_covariance_is_the_matern_kernel() -> None:
         assert ours == pytest.approx(matern, rel=1e-9, abs=1e-15)
 
 
-@pytest.mark.parametrize("lag_samples", [0, 7])
-@pytest.mark.parametrize("with_velocities", [False, True])
-def test_kalman_filter_and_smoother_equal_dense_gaussian_process_regression(
-    lag_samples: int, with_velocities: bool
-) -> None:
-    """The recursive estimates (filter, fixed-lag smoother) against the same model's posterior mean
-    computed in one dense solve over every sample (no recursion), from positions alone or with
-    measured velocities."""
-    settings = KalmanSettings(noise=1e-3, velocity_noise=1e-2, length_scale=0.3, magnitude=0.4)
-    model = MotionModel(settings)
-    rng = np.random.default_rng(4)
-    count = 60
-    stamps = EPOCH_NS + np.cumsum(rng.integers(1_500_000, 2_500_000, count))
-    t = (stamps - stamps[0]) / 1e9
-    y = np.stack([np.sin(3 * t) + 0.2 * t, np.cos(2 * t)], axis=1) + rng.normal(0, 1e-3, (count, 2))
-    v = np.stack([3 * np.cos(3 * t) + 0.2, -2 * np.sin(2 * t)], axis=1) + rng.normal(0, 1e-2, (count, 2))
-    if not with_velocities:
-        v[:] = np.nan
-    track = KalmanTrack(model, smooth=lag_samples > 0)
-    # state covariances at every sample and cross-covariances, from the prior (dense)
-    dim = model.dim
+def _dense_posterior(model: MotionModel, times: np.ndarray, measured_at: np.ndarray, rows: int):
+    """The prior covariance of the states at ``times`` (a chain of the model's transitions) and the
+    measurement matrix of the nodes ``measured_at`` (position, and velocity with rows 2): dense."""
+    dim, count = model.dim, len(times)
     covariance = np.zeros((count * dim, count * dim))
     marginal = model.prior
     transitions = [np.eye(dim)]
     marginals = [marginal]
     for k in range(1, count):
-        f, q = model.transition(t[k] - t[k - 1])
+        f, q = model.transition(times[k] - times[k - 1])
         marginal = f @ marginal @ f.T + q
         transitions.append(f)
         marginals.append(marginal)
@@ -344,27 +327,70 @@ def test_kalman_filter_and_smoother_equal_dense_gaussian_process_regression(
             block = transitions[j] @ block  # Cov(x_j, x_i) = F_j ... F_{i+1} P_i
             covariance[j * dim : (j + 1) * dim, i * dim : (i + 1) * dim] = block
             covariance[i * dim : (i + 1) * dim, j * dim : (j + 1) * dim] = block.T
+    h = np.zeros((len(measured_at) * rows, count * dim))
+    for k, node in enumerate(measured_at):
+        h[rows * k, node * dim : (node + 1) * dim] = model.position_row
+        if rows == 2:
+            h[rows * k + 1, node * dim : (node + 1) * dim] = model.velocity_row
+    return covariance, h
+
+
+@pytest.mark.parametrize("lag_samples", [0, 7])
+@pytest.mark.parametrize("with_velocities", [False, True])
+def test_kalman_filter_and_smoother_equal_dense_gaussian_process_regression(
+    lag_samples: int, with_velocities: bool
+) -> None:
+    """The recursive estimates (filter, fixed-lag smoother) of a bank of two models run as one batched
+    filter, against each model's posterior mean computed in one dense solve over every sample (no
+    recursion), from positions alone or with measured velocities; at the samples' stamps and at a
+    stamp between two samples (carried forward from the step before it)."""
+    settings = [
+        KalmanSettings(noise=1e-3, velocity_noise=1e-2, length_scale=scale, magnitude=0.4) for scale in (0.3, 0.08)
+    ]
+    models = [MotionModel(one) for one in settings]
+    rng = np.random.default_rng(4)
+    count = 60
+    stamps = EPOCH_NS + np.cumsum(rng.integers(1_500_000, 2_500_000, count))
+    t = (stamps - stamps[0]) / 1e9
+    y = np.stack([np.sin(3 * t) + 0.2 * t, np.cos(2 * t)], axis=1) + rng.normal(0, 1e-3, (count, 2))
+    v = np.stack([3 * np.cos(3 * t) + 0.2, -2 * np.sin(2 * t)], axis=1) + rng.normal(0, 1e-2, (count, 2))
+    if not with_velocities:
+        v[:] = np.nan
+    track = KalmanTrack(models, smooth=lag_samples > 0)
+    middle = count // 2  # an unmeasured node between samples middle and middle + 1
+    between = (stamps[middle] + stamps[middle + 1]) // 2
+    times = np.insert(t, middle + 1, (between - stamps[0]) / 1e9)
+    nodes = np.arange(count) + (np.arange(count) > middle)
     rows = 2 if with_velocities else 1  # measurements per sample: position (and velocity)
-    h = np.zeros((count * rows, count * dim))
+    dense = [_dense_posterior(model, times, nodes, rows) for model in models]
     noise = np.zeros(count * rows)
     measured = np.zeros((count * rows, 2))
     for k in range(count):
-        h[rows * k, k * dim : (k + 1) * dim] = model.position_row
-        noise[rows * k], measured[rows * k] = settings.noise**2, y[k]
+        noise[rows * k], measured[rows * k] = settings[0].noise ** 2, y[k]
         if with_velocities:
-            h[rows * k + 1, k * dim : (k + 1) * dim] = model.velocity_row
-            noise[rows * k + 1], measured[rows * k + 1] = settings.velocity_noise**2, v[k]
+            noise[rows * k + 1], measured[rows * k + 1] = settings[0].velocity_noise ** 2, v[k]
+    checked_between = 0
     for k in range(count):
         track.add(int(stamps[k]), y[k], v[k])
         target = k - lag_samples
         if target < 0:
             continue
         seen = slice(0, rows * (k + 1))
-        hs = h[seen]
-        gain = np.linalg.solve(hs @ covariance @ hs.T + np.diag(noise[seen]), measured[seen])
-        posterior = (covariance @ hs.T @ gain)[target * dim : (target + 1) * dim]  # (dim, 2)
-        expected = model.readout @ posterior
-        got = track.estimate(int(stamps[target]))
-        scale = np.abs(expected).max(axis=1, keepdims=True)
-        assert np.all(np.abs(got - expected) <= 1e-6 * scale), (k, got, expected)
+        wanted = [(int(stamps[target]), nodes[target])]
+        if target <= middle <= k:
+            wanted.append((int(between), middle + 1))
+            checked_between += 1
+        for stamp, node in wanted:
+            got = track.estimate(stamp)  # (models, 3, joints)
+            for m, (model, (covariance, h)) in enumerate(zip(models, dense, strict=True)):
+                dim, hs = model.dim, h[seen]
+                gain = np.linalg.solve(hs @ covariance @ hs.T + np.diag(noise[seen]), measured[seen])
+                posterior = (covariance @ hs.T @ gain)[node * dim : (node + 1) * dim]  # (dim, 2)
+                expected = model.readout @ posterior
+                scale = np.abs(expected).max(axis=1, keepdims=True)
+                # the dense solve's own conditioning (61 nodes of 15 states) is a few 1e-7 at the samples
+                # and a few 1e-6 at the node between them
+                tolerance = 1e-5 if node == middle + 1 else 1e-6
+                assert np.all(np.abs(got[m] - expected) <= tolerance * scale), (k, m, stamp, got[m], expected)
         track.forget_before(int(stamps[target]))
+    assert checked_between == lag_samples + 1

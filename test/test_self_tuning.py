@@ -165,15 +165,15 @@ def test_explicit_parameters_win() -> None:
     for k in range(200):
         explicit.update(int(stamps[k]), names, q[k].tolist())
     bank: KalmanBank = explicit._groups[0].track
-    assert len(bank.tracks) == 1 and bank.tracks[0].model.settings.length_scale == 0.2
-    assert bank.tracks[0]._noise == pytest.approx(3e-4**2)
+    assert len(bank.models) == 1 and bank.models.models[0].settings.length_scale == 0.2
+    assert bank.track._noise == pytest.approx(3e-4**2)
     automatic = StreamingEstimator(names, settings=StreamSettings(method="kalman"))
     for k in range(200):
         automatic.update(int(stamps[k]), names, q[k].tolist())
     bank = automatic._groups[0].track
-    assert len(bank.tracks) == 4
+    assert len(bank.models) == 4
     step = 2 * np.pi / 2**14
-    assert step**2 / 12 <= bank.tracks[0]._noise <= 5 * step**2 / 12  # read from the samples: about the step's
+    assert step**2 / 12 <= bank.track._noise <= 5 * step**2 / 12  # read from the samples: about the step's
     # a fixed window: no stated uncertainty
     _, _, spread = run(StreamSettings(adaptive=False), stamps, q)
     assert np.isnan(spread).all()

@@ -1,13 +1,22 @@
-"""Kalman filtering and fixed-lag smoothing of one group of joints sampled at the same stamps.
+"""Kalman filtering and fixed-lag smoothing of one group of joints sampled at the same stamps, for
+several motion models at once.
 
 Every joint of a group follows the same :class:`~neforward_ros.estimation.motion.MotionModel` and is
 measured at the same stamps with the same noise, so the filter's covariance and gains are the same
-for all of them: one covariance per group, one state column per joint. A step costs a few small
-matrix products whatever the number of joints.
+for all of them: one covariance per group and model, one state column per joint. The models of a
+bank (:mod:`.kalman_bank`) differ only in their length scale and run side by side as one batched
+filter: every array carries a leading model axis, and a step costs a few batched products of small
+matrices whatever the number of joints and models.
 
 The causal estimate at a sample is the filtered state. The fixed-lag estimate at a sample ``lag``
-old is the Rauch-Tung-Striebel smoothed state, computed backwards from the newest sample over the
-steps kept since; the smoother gains are computed once per step, when the next sample arrives.
+old is the Rauch-Tung-Striebel smoothed state: going back one step is x_k = o_k + G_k x_(k+1), with
+the smoother gain G_k and offset o_k (the filtered state less G_k times the next step's prediction)
+known once the next sample is in. Unrolled from the newest sample N, the read-out (position,
+velocity, acceleration) of x_k is R x_k = c_k + P_k xf_N, with c_k and P_k = R G_k ... G_(N-1) kept
+for every step: when a sample N + 1 arrives, every c_k gains P_k o_N and every P_k becomes P_k G_N,
+two batched products for all the steps kept, and an estimate at a step is one product more. An
+estimate between steps (a stamp whose sample was not filtered) goes back step by step and carries
+the state forward to it.
 """
 
 from __future__ import annotations
@@ -17,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from neforward_ros.estimation.motion import MotionModel
+from neforward_ros.estimation.motion import MotionModel, MotionModels
 from neforward_ros.stamps import NS
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
@@ -25,119 +34,187 @@ _LOG_2PI = float(np.log(2.0 * np.pi))
 
 @dataclass
 class _Step:
-    """One sample's filter output: the state after the measurement, the prediction before it, and the
-    smoother gain towards the next step (set when the next sample arrives)."""
+    """One sample's filter output, per model: the state after the measurement (models, dim, m), the
+    prediction before it, the covariance after the measurement (models, dim, dim), and the smoother
+    gain and offset towards the next step (set when the next sample arrives)."""
 
     stamp: int
-    filtered: np.ndarray  # (dim, m)
-    predicted: np.ndarray  # (dim, m)
-    covariance: np.ndarray  # (dim, dim), after the measurement
+    filtered: np.ndarray
+    predicted: np.ndarray
+    covariance: np.ndarray
     gain: np.ndarray | None = None
+    offset: np.ndarray | None = None
 
 
 class KalmanTrack:
-    """The filter of one group: joints measured together, one state column each.
+    """The filters of one group: joints measured together, one state column each, one filter per model.
 
     Args:
-        model: the motion model.
+        models: the motion models (one or a bank's).
         smooth: whether fixed-lag estimates are asked for (then smoother gains are computed).
     """
 
-    def __init__(self, model: MotionModel, smooth: bool) -> None:
-        self.model = model
+    def __init__(self, models: list[MotionModel] | MotionModels, smooth: bool) -> None:
+        self.models = models if isinstance(models, MotionModels) else MotionModels(models)
         self.smooth = smooth
         self.steps: deque[_Step] = deque()
-        self._noise = model.settings.noise**2
-        self._velocity_noise = model.settings.velocity_noise**2
-        self.nis = np.ones(0)
-        """Each joint's normalised innovation squared at the last sample, per measured dimension
-        (1 on average when the model fits the motion and the noise)."""
+        self._unrolled: _Unrolled | None = None  # c_k and P_k of the module docstring, per step kept
+        first = self.models.models[0].settings
+        self._noise = first.noise**2
+        self._velocity_noise = first.velocity_noise**2
+        self.nis = np.ones((len(self.models), 0))
+        """Each model's and joint's normalised innovation squared at the last sample, per measured
+        dimension (1 on average when the model fits the motion and the noise)."""
 
     def add(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> np.ndarray:
         """One sample of every joint: positions (m,), velocities (m,), NaN where not measured.
-        Velocities are used when every joint has one. Returns each joint's log-likelihood of the
-        sample under the prediction (m,): 0 for the first sample."""
-        model = self.model
+        Velocities are used when every joint has one. Returns each model's and joint's log-likelihood
+        of the sample under the prediction (models, m): 0 for the first sample."""
+        models = self.models
+        count = len(models)
         if not self.steps:
-            state = np.zeros((model.dim, len(positions)))
-            covariance = model.prior.copy()
-            # The first position goes to the trend, whose prior is wide; the update below splits it.
-            predicted = state
+            state = np.zeros((count, models.dim, len(positions)))
+            covariance = models.prior.copy()
         else:
             last = self.steps[-1]
-            transition, noise = model.transition((stamp - last.stamp) / NS)
+            transition, noise = models.transition((stamp - last.stamp) / NS)
             state = transition @ last.filtered
-            covariance = transition @ last.covariance @ transition.T + noise
+            covariance = transition @ last.covariance @ transition.transpose(0, 2, 1) + noise
             if self.smooth:
-                last.gain = np.linalg.solve(covariance, transition @ last.covariance).T
-            predicted = state
+                gain = np.linalg.solve(covariance, transition @ last.covariance).transpose(0, 2, 1)
+                last.gain, last.offset = gain, last.filtered - gain @ state
+                if self._unrolled is not None:
+                    self._unrolled.advance(gain, last.offset)
+        predicted = state
         first = not self.steps
         if np.isfinite(velocities).all():
-            rows = np.stack([model.position_row, model.velocity_row])
-            projected = rows @ covariance  # (2, dim)
-            innovation_covariance = projected @ rows.T + np.diag([self._noise, self._velocity_noise])
-            gain = np.linalg.solve(innovation_covariance, projected).T  # (dim, 2)
-            innovation = np.stack([positions, velocities]) - rows @ state
+            rows = models.measured_rows  # (models, 2, dim)
+            projected = rows @ covariance  # (models, 2, dim)
+            innovation_covariance = projected @ rows.transpose(0, 2, 1)
+            innovation_covariance[:, 0, 0] += self._noise
+            innovation_covariance[:, 1, 1] += self._velocity_noise
+            gain = np.linalg.solve(innovation_covariance, projected).transpose(0, 2, 1)  # (models, dim, 2)
+            innovation = np.stack([positions, velocities]) - rows @ state  # (models, 2, m)
             state = state + gain @ innovation
             covariance = covariance - gain @ projected
             weighted = np.linalg.solve(innovation_covariance, innovation)
-            squared = np.sum(innovation * weighted, axis=0)
-            log_det = float(np.log(np.linalg.det(innovation_covariance)))
+            squared = np.sum(innovation * weighted, axis=1)  # (models, m)
+            log_det = np.log(np.linalg.det(innovation_covariance))[:, None]
             likelihood = -0.5 * (squared + log_det + 2.0 * _LOG_2PI)
             self.nis = squared / 2.0
         else:  # the position (c + g, states 0 and 3) alone: scalar innovation
-            projected = covariance[0] + covariance[3]
-            variance = projected[0] + projected[3] + self._noise
+            projected = covariance[:, 0] + covariance[:, 3]  # (models, dim)
+            variance = (projected[:, 0] + projected[:, 3] + self._noise)[:, None]  # (models, 1)
             gain = projected / variance
-            innovation = positions - state[0] - state[3]
-            state = state + np.outer(gain, innovation)
-            covariance = covariance - np.outer(gain, projected)
+            innovation = positions - state[:, 0] - state[:, 3]  # (models, m)
+            state = state + gain[:, :, None] * innovation[:, None, :]
+            covariance = covariance - gain[:, :, None] * projected[:, None, :]
             likelihood = -0.5 * (innovation**2 / variance + np.log(variance) + _LOG_2PI)
             self.nis = innovation**2 / variance
-        covariance = 0.5 * (covariance + covariance.T)
+        covariance = 0.5 * (covariance + covariance.transpose(0, 2, 1))
         self.steps.append(_Step(stamp, state, predicted, covariance))
+        if self.smooth:
+            if first:
+                self._unrolled = _Unrolled(models.readout, len(positions))
+            assert self._unrolled is not None
+            self._unrolled.append()
         if first:
-            self.nis = np.ones(len(positions))
-            return np.zeros(len(positions))
+            self.nis = np.ones((count, len(positions)))
+            return np.zeros((count, len(positions)))
         return likelihood
 
     def estimate(self, target: int) -> np.ndarray:
-        """(3, m) position, velocity and acceleration at the target stamp: smoothed over every step kept
-        after it, from the newest step ≤ target, carried forward to the target by the model."""
+        """(models, 3, m) position, velocity and acceleration at the target stamp: smoothed over every
+        step kept after it, from the newest step <= target, carried forward to the target by the model."""
         steps = self.steps
         index = len(steps) - 1
         while index > 0 and steps[index].stamp > target:
             index -= 1
         state = steps[-1].filtered
-        for k in range(len(steps) - 2, index - 1, -1):
-            step = steps[k]
-            if step.gain is None:  # not smoothing: the filtered state
+        at_step = target == steps[index].stamp
+        if index < len(steps) - 1:
+            if not self.smooth:  # the filtered state
                 state = steps[index].filtered
-                break
-            state = step.filtered + step.gain @ (state - steps[k + 1].predicted)
-        if target > steps[index].stamp:
-            transition, _ = self.model.transition((target - steps[index].stamp) / NS)
+            elif at_step:
+                assert self._unrolled is not None
+                offsets, products = self._unrolled.at(index)
+                return offsets + products @ state
+            else:
+                for k in range(len(steps) - 2, index - 1, -1):
+                    state = steps[k].offset + steps[k].gain @ state
+        if target > steps[index].stamp:  # (at_step is False)
+            transition, _ = self.models.transition((target - steps[index].stamp) / NS)
             state = transition @ state
-        return self.model.readout @ state
+        return self.models.readout @ state
 
-    def acceleration_variance(self) -> float:
-        """The acceleration's variance at the newest sample (the filter's; the same for every joint
-        of the group)."""
-        row = self.model.readout[2]
-        return float(row @ self.steps[-1].covariance @ row)
+    def acceleration_variance(self) -> np.ndarray:
+        """Each model's acceleration variance at the newest sample (models,): the filter's, the same
+        for every joint of the group."""
+        row = self.models.readout[:, 2]  # (models, dim)
+        return np.einsum("md,mde,me->m", row, self.steps[-1].covariance, row)
 
     def forget_before(self, stamp: int) -> None:
         """Drop the steps no later estimate needs: all before the newest step at or before ``stamp``."""
         steps = self.steps
+        dropped = 0
         while len(steps) > 1 and steps[1].stamp <= stamp:
             steps.popleft()
+            dropped += 1
+        if dropped and self._unrolled is not None:
+            self._unrolled.start += dropped
 
     def select(self, columns: list[int]) -> KalmanTrack:
         """A track of these state columns only, with the same history."""
-        track = KalmanTrack(self.model, self.smooth)
+        track = KalmanTrack(self.models, self.smooth)
         track._noise, track._velocity_noise = self._noise, self._velocity_noise
         for step in self.steps:
             track.steps.append(
-                _Step(step.stamp, step.filtered[:, columns], step.predicted[:, columns], step.covariance, step.gain)
+                _Step(step.stamp, step.filtered[:, :, columns], step.predicted[:, :, columns], step.covariance)
             )
+        track._unrolled = None if self._unrolled is None else self._unrolled.select(columns)
         return track
+
+
+class _Unrolled:
+    """c_k (models, 3, m) and P_k (models, 3, dim) of the module docstring for the steps kept, in
+    buffers that grow by doubling: the steps are rows start .. end - 1, oldest first."""
+
+    def __init__(self, readout: np.ndarray, joints: int, capacity: int = 32) -> None:
+        self.readout = readout  # (models, 3, dim)
+        models, _, dim = readout.shape
+        self.offsets = np.zeros((models, capacity, 3, joints))
+        self.products = np.zeros((models, capacity, 3, dim))
+        self.start = self.end = 0
+
+    def append(self) -> None:
+        """A new newest step: c = 0, P = R."""
+        if self.end == self.offsets.shape[1]:
+            kept = self.end - self.start
+            if 2 * kept > self.offsets.shape[1]:
+                self.offsets = np.concatenate([self.offsets, np.zeros_like(self.offsets)], axis=1)
+                self.products = np.concatenate([self.products, np.zeros_like(self.products)], axis=1)
+            self.offsets[:, :kept] = self.offsets[:, self.start : self.end]
+            self.products[:, :kept] = self.products[:, self.start : self.end]
+            self.start, self.end = 0, kept
+        self.offsets[:, self.end] = 0.0
+        self.products[:, self.end] = self.readout
+        self.end += 1
+
+    def advance(self, gain: np.ndarray, offset: np.ndarray) -> None:
+        """The newest step gets a successor: every c_k gains P_k o, every P_k becomes P_k G."""
+        models, _, dim = self.readout.shape
+        live = slice(self.start, self.end)
+        products = self.products[:, live].reshape(models, -1, dim)  # (models, kept * 3, dim)
+        self.offsets[:, live] += (products @ offset).reshape(self.offsets[:, live].shape)
+        self.products[:, live] = (products @ gain).reshape(models, -1, 3, dim)
+
+    def at(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """(c, P) of the step ``index`` among those kept."""
+        return self.offsets[:, self.start + index], self.products[:, self.start + index]
+
+    def select(self, columns: list[int]) -> _Unrolled:
+        unrolled = _Unrolled(self.readout, len(columns), self.offsets.shape[1])
+        unrolled.offsets = self.offsets[..., columns]
+        unrolled.products = self.products.copy()
+        unrolled.start, unrolled.end = self.start, self.end
+        return unrolled

@@ -6,8 +6,9 @@ motion may change (:mod:`.motion`). A model too slow for a 5 Hz motion lags it b
 one too fast for a slow sweep lets the noise through. The bank runs a filter per length scale of
 :data:`LENGTH_SCALES` side by side (the multiple-model approach of Magill 1965 and Bar-Shalom,
 Li and Kirubarajan, *Estimation with Applications to Tracking and Navigation*, 2001, ch. 11, without
-interaction between the models), and scores each, per joint, by the log-likelihood of the samples
-under its predictions, forgotten with a time constant of :data:`MEMORY`. Each joint's estimate is
+interaction between the models), as one batched filter (:class:`~.kalman.KalmanTrack`), and scores
+each, per joint, by the log-likelihood of the samples under its predictions, forgotten with a time
+constant of :data:`MEMORY`. Each joint's estimate is
 the models' estimates weighted by exp(score), normalised: as the motion changes (a dwell, a fast
 move), the weights follow within a fraction of a second. An explicit ``length_scale`` runs that
 model alone.
@@ -15,8 +16,8 @@ model alone.
 The position noise, unless given, is read from the samples as the polynomial fits read it
 (:func:`neforward_ros.estimation.adaptive.noise_of`): white noise from the sixth differences, an
 encoder's step from the smallest non-zero change since the start (through dwells, where no sample
-changes), white noise over the last :data:`NOISE_WINDOW` samples; the velocity noise likewise from
-the velocities the messages carry.
+changes), white noise over the last :data:`NOISE_WINDOW` samples, read again every
+:data:`NOISE_EVERY` samples; the velocity noise likewise from the velocities the messages carry.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ import numpy as np
 
 from neforward_ros.estimation.adaptive import noise_of
 from neforward_ros.estimation.kalman import KalmanTrack
-from neforward_ros.estimation.motion import KalmanSettings, MotionModel
+from neforward_ros.estimation.motion import KalmanSettings, MotionModel, MotionModels
 from neforward_ros.stamps import NS
 
 LENGTH_SCALES = (0.04, 0.1, 0.25, 0.6)
@@ -37,6 +38,8 @@ MEMORY = 0.2
 """s: the time constant with which the models' scores forget."""
 NOISE_WINDOW = 64
 """Samples the white noise is read from (the newest)."""
+NOISE_EVERY = 8
+"""Samples between two readings of the noise (it changes slowly; reading it costs more than a step)."""
 FALLBACK_NOISE = 1e-4
 """rad (m): the position noise before enough samples tell it (and its floor: 1e-4 of it)."""
 FALLBACK_VELOCITY_NOISE = 1e-3
@@ -57,7 +60,7 @@ class KalmanBank:
         self,
         settings: KalmanSettings,
         smooth: bool,
-        models: list[MotionModel] | None = None,
+        models: MotionModels | None = None,
         known_noise: tuple[float | None, float | None] = (None, None),
         known_scores: np.ndarray | None = None,
     ) -> None:
@@ -68,10 +71,11 @@ class KalmanBank:
         since tell them again."""
         if models is None:
             scales = LENGTH_SCALES if settings.length_scale == 0 else (settings.length_scale,)
-            models = [MotionModel(_concrete(settings, scale)) for scale in scales]
+            models = MotionModels([MotionModel(_concrete(settings, scale)) for scale in scales])
         self.models = models
-        self.tracks = [KalmanTrack(model, smooth) for model in models]
+        self.track = KalmanTrack(models, smooth)
         self.scores: np.ndarray | None = None
+        self._weights: np.ndarray | None = None
         self.known_scores = known_scores  # (models, joints): the weights before a restart, as log-weights
         self._last: int | None = None
         self._intervals: deque[float] = deque(maxlen=16)  # s: the last intervals between samples
@@ -79,10 +83,11 @@ class KalmanBank:
         self._velocities: deque[np.ndarray] = deque(maxlen=NOISE_WINDOW)
         self._steps: dict[str, np.ndarray] = {}  # the smallest change seen so far, per joint: an encoder's step
         self.read_noise: dict[str, float] = {}  # the variances read from the samples so far
+        self._unread = dict.fromkeys(("positions", "velocities"), 0)  # samples since the noise was read
 
     @property
     def steps(self):  # the steps of the first track (the stamps all tracks share)
-        return self.tracks[0].steps
+        return self.track.steps
 
     def add(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> None:
         """One sample of every joint (see :meth:`KalmanTrack.add`)."""
@@ -95,7 +100,7 @@ class KalmanBank:
             self._positions.clear()
             self._velocities.clear()
         self._tune_noise(positions, velocities)
-        likelihoods = np.stack([track.add(stamp, positions, velocities) for track in self.tracks])
+        likelihoods = self.track.add(stamp, positions, velocities)
         if self.scores is None or self._last is None:
             self.scores = likelihoods if self.known_scores is None else likelihoods + self.known_scores
         else:
@@ -107,20 +112,22 @@ class KalmanBank:
             # about how well it follows the motion, and would hand the estimate to the fastest.
             self._intervals.append(step)
         self._last = stamp
+        self._weights = None
 
     def weights(self) -> np.ndarray:
-        """(models, joints): each model's weight per joint."""
+        """(models, joints): each model's weight per joint (worked out once per sample)."""
         assert self.scores is not None
-        shifted = self.scores - self.scores.max(axis=0, keepdims=True)
-        weights = np.exp(shifted)
-        return weights / weights.sum(axis=0, keepdims=True)
+        if self._weights is None:
+            weights = np.exp(self.scores - self.scores.max(axis=0, keepdims=True))
+            self._weights = weights / weights.sum(axis=0, keepdims=True)
+        return self._weights
 
     def estimate(self, target: int) -> np.ndarray:
         """(3, m) position, velocity and acceleration at the target: the models' mixture."""
-        if len(self.tracks) == 1:
-            return self.tracks[0].estimate(target)
-        weights = self.weights()
-        return sum(w[None, :] * track.estimate(target) for w, track in zip(weights, self.tracks, strict=True))
+        estimates = self.track.estimate(target)  # (M, 3, m)
+        if len(estimates) == 1:
+            return estimates[0]
+        return np.einsum("mj,mkj->kj", self.weights(), estimates)
 
     def acceleration_std(self) -> np.ndarray:
         """Each joint's acceleration standard deviation at the newest sample: the mixture's (each
@@ -128,9 +135,9 @@ class KalmanBank:
         if not self.steps:
             return np.zeros(0)
         target = self.steps[-1].stamp
-        estimates = np.stack([track.estimate(target)[2] for track in self.tracks])  # (M, m)
-        variances = np.array([track.acceleration_variance() for track in self.tracks])[:, None]
-        if len(self.tracks) == 1:
+        estimates = self.track.estimate(target)[:, 2]  # (M, m)
+        variances = self.track.acceleration_variance()[:, None]
+        if len(estimates) == 1:
             return np.sqrt(np.broadcast_to(variances[0], estimates.shape[1:]))
         weights = self.weights()
         mean = np.sum(weights * estimates, axis=0)
@@ -140,18 +147,17 @@ class KalmanBank:
     def nis(self) -> np.ndarray:
         """Each joint's normalised innovation squared at the last sample, of its best model."""
         best = np.argmax(self.scores, axis=0) if self.scores is not None else np.zeros(0, dtype=int)
-        stacked = np.stack([track.nis for track in self.tracks])
+        stacked = self.track.nis
         return np.take_along_axis(stacked, best[None], 0)[0] if len(best) else stacked[0]
 
     def forget_before(self, stamp: int) -> None:
-        for track in self.tracks:
-            track.forget_before(stamp)
+        self.track.forget_before(stamp)
 
     def select(self, columns: list[int]) -> KalmanBank:
         bank = KalmanBank(self.settings, self.smooth, self.models)
         bank.known_noise = dict(self.known_noise)
         bank.read_noise = dict(self.read_noise)
-        bank.tracks = [track.select(columns) for track in self.tracks]
+        bank.track = self.track.select(columns)
         bank.scores = None if self.scores is None else self.scores[:, columns]
         bank._last = self._last
         bank._intervals = deque(self._intervals, maxlen=16)
@@ -162,17 +168,22 @@ class KalmanBank:
 
     def _noise(self, kind: str, samples: deque[np.ndarray], fallback: float) -> float:
         """A measurement variance for the whole group: the median of its joints' (white noise, or an
-        encoder's step / sqrt(12)), from the samples kept; the fallback's until there are 32. The
-        step is the smallest change seen since the start, kept through dwells (where no sample
-        changes and the recent samples alone would say nothing). Joints that have not moved since
-        the start say nothing of the noise and are left out of the median (with them, a group whose
-        other joints still rest would take a noise of zero and trust every sample beyond measure)."""
+                encoder's step / sqrt(12)), from the samples kept; the fallback's until there are 32. The
+                step is the smallest change seen since the start, kept through dwells (where no sample
+                changes and the recent samples alone would say nothing). Joints that have not moved since
+                the start say nothing of the noise and are left out of the median (with them, a group whose
+                other joints still rest would take a noise of zero and trust every sample beyond measure). Once
+        the window is full, read every :data:`NOISE_EVERY` samples."""
         if len(samples) < NOISE_WINDOW:
             known = self.known_noise.get(kind)
             if known is not None:
                 return known
             if len(samples) < 32:
                 return fallback**2
+        elif kind in self.read_noise and self._unread[kind] < NOISE_EVERY - 1:
+            self._unread[kind] += 1
+            return self.read_noise[kind]
+        self._unread[kind] = 0
         white, step = noise_of(np.stack(samples), coloured=False)
         seen = self._steps.get(kind)
         step = np.where(step > 0.0, step, np.inf)
@@ -193,13 +204,11 @@ class KalmanBank:
         if settings.noise == 0:
             self._positions.append(np.asarray(positions, dtype=float).copy())
             noise = self._noise("positions", self._positions, FALLBACK_NOISE)
-            for track in self.tracks:
-                track._noise = noise
+            self.track._noise = noise
         if settings.velocity_noise == 0 and np.isfinite(velocities).all():
             self._velocities.append(np.asarray(velocities, dtype=float).copy())
             noise = self._noise("velocities", self._velocities, FALLBACK_VELOCITY_NOISE)
-            for track in self.tracks:
-                track._velocity_noise = noise
+            self.track._velocity_noise = noise
 
 
 def _median(values: deque[float]) -> float:

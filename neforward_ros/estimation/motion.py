@@ -146,34 +146,93 @@ class MotionModel:
         n = ORDER
         transition = np.zeros((self.dim, self.dim))
         noise = np.zeros((self.dim, self.dim))
-        # Trend: constant acceleration with white jerk.
-        dt2 = dt * dt
-        transition[0, 0] = transition[1, 1] = transition[2, 2] = 1.0
-        transition[0, 1] = transition[1, 2] = dt
-        transition[0, 2] = 0.5 * dt2
-        j = TREND_JERK
-        noise[0, 0] = j * dt2 * dt2 * dt / 20.0
-        noise[0, 1] = noise[1, 0] = j * dt2 * dt2 / 8.0
-        noise[0, 2] = noise[2, 0] = j * dt2 * dt / 6.0
-        noise[1, 1] = j * dt2 * dt / 3.0
-        noise[1, 2] = noise[2, 1] = j * dt2 / 2.0
-        noise[2, 2] = j * dt
+        transition[:3, :3], noise[:3, :3] = _trend(dt)
         # Matern part: exp(A dt) = exp(-lam dt) sum_k N^k dt^k / k!, and Q as a sum of gamma terms.
         transition[3:, 3:] = (self._powers_flat @ (dt**self._exponents)).reshape(n, n) * math.exp(-self.lam * dt)
         noise[3:, 3:] = (self._noise_terms @ _lower_gamma_regularized(2 * n - 1, 2.0 * self.lam * dt)).reshape(n, n)
         return transition, noise
 
 
+class MotionModels:
+    """Models that differ only in their length scale (a bank's), as one batched system: every array
+    carries a leading model axis.
+
+    Attributes:
+        models: the models.
+        dim: the state's size (every model's).
+        measured_rows: (models, 2, dim): the position's and the velocity's read-out rows.
+        readout: (models, 3, dim): position, velocity and acceleration from a state.
+        prior: (models, dim, dim): each model's covariance before any sample.
+    """
+
+    def __init__(self, models: list[MotionModel]) -> None:
+        self.models = list(models)
+        first = self.models[0]
+        self.dim = first.dim
+        self._lam = np.array([model.lam for model in self.models])
+        self._powers_flat = np.stack([model._powers_flat for model in self.models])  # (M, n*n, n)
+        self._noise_terms = np.stack([model._noise_terms for model in self.models])  # (M, n*n, 2n - 1)
+        self._exponents = first._exponents
+        self.measured_rows = np.stack([np.stack([model.position_row, model.velocity_row]) for model in self.models])
+        self.readout = np.stack([model.readout for model in self.models])
+        self.prior = np.stack([model.prior for model in self.models])
+        self._transitions: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+
+    def __len__(self) -> int:
+        return len(self.models)
+
+    def transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """(F, Q) of every model over dt seconds, (models, dim, dim) each (see
+        :meth:`MotionModel.transition`); kept for the intervals seen last: read-only arrays."""
+        cache = self._transitions
+        found = cache.get(dt)
+        if found is None:
+            if len(cache) >= 64:
+                cache.clear()
+            found = cache[dt] = self._transition(dt)
+            for array in found:
+                array.flags.writeable = False
+        return found
+
+    def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        n = ORDER
+        count = len(self.models)
+        transition = np.zeros((count, self.dim, self.dim))
+        noise = np.zeros((count, self.dim, self.dim))
+        transition[:, :3, :3], noise[:, :3, :3] = _trend(dt)
+        powers = dt**self._exponents * np.exp(-self._lam * dt)[:, None]  # (M, n): dt^k exp(-lam dt)
+        transition[:, 3:, 3:] = (self._powers_flat @ powers[:, :, None]).reshape(count, n, n)
+        gamma = _lower_gamma_regularized(2 * n - 1, 2.0 * self._lam * dt)  # (M, 2n - 1)
+        noise[:, 3:, 3:] = (self._noise_terms @ gamma[:, :, None]).reshape(count, n, n)
+        return transition, noise
+
+
+def _trend(dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The trend's (F, Q) over dt: constant acceleration driven by white jerk of :data:`TREND_JERK`."""
+    dt2 = dt * dt
+    transition = np.array([[1.0, dt, 0.5 * dt2], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    j = TREND_JERK
+    noise = j * np.array([
+        [dt2 * dt2 * dt / 20.0, dt2 * dt2 / 8.0, dt2 * dt / 6.0],
+        [dt2 * dt2 / 8.0, dt2 * dt / 3.0, dt2 / 2.0],
+        [dt2 * dt / 6.0, dt2 / 2.0, dt],
+    ])  # fmt: skip
+    return transition, noise
+
+
 _RECIPROCALS = 1.0 / np.arange(1, 4097)
 
 
-def _lower_gamma_regularized(count: int, x: float) -> np.ndarray:
+def _lower_gamma_regularized(count: int, x: float | np.ndarray) -> np.ndarray:
     """P(m + 1, x) for m = 0 .. count - 1: exp(-x) sum_{j > m} x^j / j!, summed from the tail up (all
-    terms positive, so accurate for small and large x alike)."""
-    terms = min(count + int(x + 10.0 * math.sqrt(x) + 25.0), len(_RECIPROCALS))
-    series = np.cumprod(x * _RECIPROCALS[:terms])  # x^j / j!, j = 1 .. terms
-    tails = np.cumsum(series[::-1])[::-1]  # sum_{i >= j} x^i / i!
-    return math.exp(-x) * tails[:count]
+    terms positive, so accurate for small and large x alike); for an array of x (M,), (M, count)."""
+    values = np.atleast_1d(np.asarray(x, dtype=float))
+    largest = float(values.max())
+    terms = min(count + int(largest + 10.0 * math.sqrt(largest) + 25.0), len(_RECIPROCALS))
+    series = np.cumprod(values[:, None] * _RECIPROCALS[:terms], axis=1)  # x^j / j!, j = 1 .. terms
+    tails = np.cumsum(series[:, ::-1], axis=1)[:, ::-1]  # sum_{i >= j} x^i / i!
+    out = np.exp(-values)[:, None] * tails[:, :count]
+    return out if np.ndim(x) else out[0]
 
 
 def _stationary_covariance(generator: np.ndarray) -> np.ndarray:
