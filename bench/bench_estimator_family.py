@@ -28,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from hindsight import best, relative_rms
-from motion_family import KINDS, make
+from motion_family import KINDS, make, repeated
 
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
@@ -81,7 +81,7 @@ def main() -> None:
         for rate in rates:
             for bits, repeats in encoders:
                 t, q, _, qdd = make(kind, rate, bits, SEED, args.seconds, repeats=repeats)
-                fresh = np.flatnonzero(np.r_[True, np.any(q[1:] != q[:-1], axis=1)])
+                fresh = np.flatnonzero(~repeated(SEED, len(t), repeats))  # hindsight knows the repeats
                 inside = fresh[(t[fresh] > 1.0) & (t[fresh] < t[-1] - 0.5)]
                 evaluated = inside[:: max(1, len(inside) // EVALUATED)]
                 in_fresh = np.searchsorted(fresh, evaluated)

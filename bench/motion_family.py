@@ -96,9 +96,15 @@ def make(kind: str, rate: float, bits: int, seed: int, seconds: float = 8.0, joi
         q, qdd = gait(t, rng, joints)
     step = 2 * np.pi / 2**bits
     measured = np.round(q / step) * step
-    if repeats:
-        again = np.flatnonzero(np.random.default_rng(seed + 1).random(len(t)) < repeats)
-        again = again[again > 0]
-        for k in again:  # in order: a run of repeats holds the last new reading
-            measured[k] = measured[k - 1]
+    for k in np.flatnonzero(repeated(seed, len(t), repeats)):  # in order: a run holds the last new reading
+        measured[k] = measured[k - 1]
     return t, measured, q, qdd
+
+
+def repeated(seed: int, count: int, share: float) -> np.ndarray:
+    """Which of :func:`make`'s ``count`` samples repeat the sample before (bool (count,))."""
+    if not share:
+        return np.zeros(count, dtype=bool)
+    again = np.random.default_rng(seed + 1).random(count) < share
+    again[0] = False
+    return again

@@ -58,7 +58,11 @@ def test_epoch_sized_stamps_keep_their_precision() -> None:
     _, qdd_relative = estimate_derivatives(t, q)
     epoch_ns = np.int64(1_700_000_000) * 10**9 + np.round(t * 1e9).astype(np.int64)
     _, qdd_ns = estimate_derivatives(epoch_ns, q)
-    assert relative_rms(qdd_ns, qdd_relative) <= 1e-6  # only the rounding of t to whole ns differs
+    # only the rounding of t to whole ns differs: on noise-free samples it is the only noise there is,
+    # and the noise read on the stamps sees it, so the windows chosen may differ; both are as close to
+    # the truth (5.0e-6 and 5.3e-6)
+    assert relative_rms(qdd_ns, qdd_relative) <= 3e-6
+    assert relative_rms(qdd_ns, qdd_true, INTERIOR) <= 1e-5
     _, qdd_float = estimate_derivatives(1.7e9 + t, q)  # float epoch seconds: 0.24 us resolution
     assert relative_rms(qdd_float, qdd_true, INTERIOR) <= 2e-3
 

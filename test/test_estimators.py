@@ -132,8 +132,9 @@ def test_the_issues_own_cases_half_a_hertz_after_start_and_three_hertz_after_a_g
         else:
             stretch = (t_out >= gap - 0.5) & (t_out <= gap + 1.3)
             steady = (t_out > first + 1.0) & ~stretch
-        steady_rms = np.sqrt(np.mean(error[steady] ** 2))
-        assert np.abs(error[stretch]).max() <= 5.0 * steady_rms, (frequency, np.abs(error[stretch]).max(), steady_rms)
+        # issue 26's measure: the worst error after the start or the gap at most 3x the steady 99th percentile
+        steady_p99 = np.percentile(np.abs(error[steady]), 99)
+        assert np.abs(error[stretch]).max() <= 3.0 * steady_p99, (frequency, np.abs(error[stretch]).max(), steady_p99)
 
 
 # -- readiness ------------------------------------------------------------------------------------

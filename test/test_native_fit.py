@@ -55,7 +55,7 @@ def test_c_and_numpy_choose_the_same_windows_and_agree_to_rounding() -> None:
         t, y, target, h, order, lead, derivative, still = window(rng)
         want = adaptive.python_adaptive_fit(t, y, target, h, order, lead, derivative)
         got = native_fit.fit(lib, t, y, target, *adaptive._ladder_and_leads(h, lead), order, derivative,
-                             adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._SIXTH, adaptive.FLOOR,
+                             adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._GAIN, adaptive.FLOOR,
                              adaptive.GROWTH)  # fmt: skip
         assert got is not None
         np.testing.assert_array_equal(got[4], want[4])  # strained: the same windows chosen
@@ -66,8 +66,9 @@ def test_c_and_numpy_choose_the_same_windows_and_agree_to_rounding() -> None:
             scale = np.abs(want[k]) + want[3] * h ** (2 - k) + 1e-5 * np.abs(y).max(axis=0) / h**k
             error = np.abs(got[k] - want[k])[moving] / scale[moving]
             # rounding, through the conditioning of each degree's normal equations: a causal window is the
-            # worst conditioned (degree 5: 1e-7; degree 2 with numpy 2.4's summation: 1.3e-8)
-            bound = 1e-7 if lead < 0.05 else 1e-8
+            # worst conditioned (degree 5: 1.3e-7 against a spread read from jittered stamps' divided
+            # differences; degree 2 with numpy 2.4's summation: 1.3e-8)
+            bound = 3e-7 if lead < 0.05 else 1e-8
             assert np.all(error <= bound), (k, order, lead, error.max())
             worst = max(worst, float(error.max(initial=0.0)))
         np.testing.assert_allclose(got[3], want[3], rtol=1e-6)

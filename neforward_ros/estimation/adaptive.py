@@ -18,7 +18,10 @@ The noise is read from each joint's own samples in the largest window: white noi
 absolute sixth difference (the motion's contribution to a sixth difference is small at the rates
 joints are sampled, and where it is not it makes the estimate cautious, not wrong), and an
 encoder's step from the smallest non-zero difference between consecutive samples (sigma = step /
-sqrt(12)); the larger of the two is taken. A quantisation error is not white: it changes only when
+sqrt(12)), where some consecutive samples are equal (a joint that moves less than a step per sample:
+there the rounding is not white and the differences do not show it; a joint that moves several steps
+per sample rounds afresh at every sample, its rounding is white and the differences read it); the
+larger of the two is taken. A quantisation error is not white: it changes only when
 the joint crosses a step, so a window of N samples holds only about (distance travelled / step)
 independent errors, and its variance is scaled up by N over that number.
 
@@ -60,7 +63,7 @@ BLOCK = 2048
 """Targets fitted together by :func:`adaptive_fits`."""
 ROUGHNESS = 0.01
 """The noise, relative to the samples' spread in the largest window, above which an estimate strains."""
-_SIXTH = math.sqrt(2.0 / math.pi) * math.sqrt(924.0)  # mean |N(0, 1)| times the sixth difference's gain
+_GAIN = math.sqrt(2.0 / math.pi)  # mean |N(0, 1)|
 
 
 def ladder(h_max: float) -> np.ndarray:
@@ -76,11 +79,35 @@ def _ladder_and_leads(h_max: float, lead: float) -> tuple[np.ndarray, np.ndarray
     return half_widths, np.ascontiguousarray(np.minimum(float(lead), half_widths))
 
 
-def noise_of(values: np.ndarray, coloured: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """(noise sigma, quantisation step) per column of consecutive samples (k, n); zeros when there
-    are too few samples to tell.
+def sixth_differences(times: np.ndarray, values: np.ndarray, stride: int = 1) -> np.ndarray:
+    """The normalised sixth divided differences of samples ``stride`` apart: for every 7 samples
+    i, i + stride, ..., i + 6 stride (count - 6 stride, n), the combination of their values that
+    vanishes on every polynomial of degree 5 through their stamps (weights 1 / prod_(j != k)
+    (t_k - t_j)), scaled to unit norm: white noise of deviation sigma gives N(0, sigma^2) whatever
+    the stamps' spacing, so irregular stamps (a driver's jitter) do not read as noise. On evenly
+    spaced stamps it is the sixth difference over sqrt(924)."""
+    count = len(times) - 6 * stride
+    if count <= 0:
+        return np.zeros((0, values.shape[1]))
+    stamps = np.stack([times[k * stride : k * stride + count] for k in range(7)], axis=1)  # (count, 7)
+    spans = stamps[:, 6] - stamps[:, 0]
+    x = (stamps - stamps[:, :1]) / np.where(spans > 0.0, spans, 1.0)[:, None]
+    differences = x[:, :, None] - x[:, None, :]
+    differences[:, np.arange(7), np.arange(7)] = 1.0
+    weights = 1.0 / np.prod(differences, axis=2)
+    weights *= 1.0 / np.sqrt(np.einsum("ik,ik->i", weights, weights))[:, None]
+    total = weights[:, :1] * values[:count]
+    for k in range(1, 7):
+        total = total + weights[:, k : k + 1] * values[k * stride : k * stride + count]
+    return total
 
-    The noise is read from the mean absolute sixth difference of consecutive samples, and, with
+
+def noise_of(times: np.ndarray, values: np.ndarray, coloured: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """(noise sigma, quantisation step) per column of consecutive samples (k, n) at ``times`` (k,);
+    zeros when there are too few samples to tell.
+
+    The noise is read from the mean absolute sixth divided difference (:func:`sixth_differences`) of
+    consecutive samples, and, with
     ``coloured``, also of samples 2, 4, 8 ... apart while at least 8 such differences fit: a real
     arm's logged positions carry several times more noise at 15-100 Hz than at the sampling rate's
     Nyquist frequency (the Panda's, about 5x), which consecutive samples do not see, and which the
@@ -92,35 +119,31 @@ def noise_of(values: np.ndarray, coloured: bool = True) -> tuple[np.ndarray, np.
     if len(values) < 8:
         return np.zeros(n), np.zeros(n)
     first = values[1:] - values[:-1]
-    sixth = np.diff(first, 5, axis=0)
-    white = np.add.reduce(np.abs(sixth), axis=0) * (1.0 / (len(sixth) * _SIXTH))
+    sixth = sixth_differences(times, values)
+    white = np.add.reduce(np.abs(sixth), axis=0) * (1.0 / (len(sixth) * _GAIN))
     if coloured:
-        white = _coloured(values, np.array([0]), np.array([len(values)]), white[None])[0]
+        white = _coloured(times, values, np.array([0]), np.array([len(values)]), white[None])[0]
     steps = np.abs(first)
+    still = np.any(steps == 0.0, axis=0)
     steps[steps == 0.0] = np.inf
-    step = np.minimum.reduce(steps, axis=0)
+    step = np.where(still, np.minimum.reduce(steps, axis=0), np.inf)
     return white, np.where(np.isfinite(step), step, 0.0)
 
 
-_BINOMIAL = (1.0, -6.0, 15.0, -20.0, 15.0, -6.0, 1.0)
-
-
-def _coloured(y: np.ndarray, lo: np.ndarray, hi: np.ndarray, white: np.ndarray) -> np.ndarray:
+def _coloured(t: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray, white: np.ndarray) -> np.ndarray:
     """The noise of :func:`noise_of` with strides 2, 4, 8 ..., for the windows [lo, hi) of y (T, n)
-    whose stride-1 noise is ``white`` (M, n)."""
+    at t (T,) whose stride-1 noise is ``white`` (M, n)."""
     best = white.copy()
     previous = white
     alive = np.ones(white.shape, dtype=bool)
     s = 2
     while 6 * s + 8 <= int(np.max(hi - lo, initial=0)):
         count = len(y) - 6 * s
-        sixth = _BINOMIAL[0] * y[:count]
-        for k in range(1, 7):
-            sixth = sixth + _BINOMIAL[k] * y[k * s : k * s + count]
+        sixth = sixth_differences(t, y, s)
         total = np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(np.abs(sixth), axis=0)])
         last = np.clip(hi - 6 * s, 0, count)  # differences wholly inside: [lo, hi - 6 s)
         number = np.maximum(last - lo, 0)
-        noise = (total[last] - total[np.minimum(lo, last)]) / (np.maximum(number, 1)[:, None] * _SIXTH)
+        noise = (total[last] - total[np.minimum(lo, last)]) / (np.maximum(number, 1)[:, None] * _GAIN)
         alive = alive & (number >= 8)[:, None] & (noise <= GROWTH * previous)
         best = np.where(alive & (previous > best), previous, best)  # a stride counts once the next one agrees
         previous = noise
@@ -163,22 +186,26 @@ def accel_std(
     return np.sqrt(np.maximum(variance, 0.0) * effective)
 
 
-def _window_noise(y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`noise_of` of the samples [lo, hi) of y (T, n), for many windows at once: two (M, n)."""
-    count = len(y)
-    sixth = np.abs(np.diff(y, 6, axis=0)) if count > 6 else np.zeros((0, y.shape[1]))
+def _window_noise(t: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`noise_of` of the samples [lo, hi) of y (T, n) at t (T,), for many windows at once: two
+    (M, n)."""
+    sixth = np.abs(sixth_differences(t, y))
     total = np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(sixth, axis=0)])
     last = np.clip(hi - 6, 0, len(sixth))  # sixth differences wholly inside: [lo, hi - 6)
     number = np.maximum(last - lo, 0)
     white = np.where(number[:, None] > 0, (total[last] - total[np.minimum(lo, last)]) / np.maximum(number, 1)[:, None],
-                     0.0) / _SIXTH  # fmt: skip
+                     0.0) / _GAIN  # fmt: skip
     white[hi - lo < 8] = 0.0
-    white = _coloured(y, lo, hi, white)
+    white = _coloured(t, y, lo, hi, white)
     steps = np.abs(np.diff(y, axis=0))
+    zeros = np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(steps == 0.0, axis=0)])
+    changes = np.clip(hi - 1, 0, len(steps))  # the changes wholly inside: [lo, hi - 1)
+    still = zeros[changes] - zeros[np.minimum(lo, changes)] > 0
     steps = np.where(steps > 0.0, steps, np.inf)
     pairs = np.stack([lo, np.maximum(hi - 1, lo + 1)], axis=1).reshape(-1)
     padded = np.concatenate([steps, np.full((1, y.shape[1]), np.inf)])
     step = np.minimum.reduceat(padded, np.minimum(pairs, len(steps)), axis=0)[::2]
+    step = np.where(still, step, np.inf)
     step = np.where(np.isfinite(step) & (hi - lo >= 8)[:, None], step, 0.0)
     return white, step
 
@@ -205,7 +232,7 @@ def adaptive_fits(
     library = native_fit.FIT.get(wait=len(targets) >= native_fit.WORTH_WAITING)
     columns = np.full(y.shape[1], derivative)
     got = None if library is None else native_fit.fits(library, t, y, targets, *_ladder_and_leads(h_max, lead), order,
-                                                       columns, GAMMA, ROUGHNESS, _SIXTH, FLOOR, GROWTH)  # fmt: skip
+                                                       columns, GAMMA, ROUGHNESS, _GAIN, FLOOR, GROWTH)  # fmt: skip
     if got is None:
         return python_adaptive_fits(t, y, targets, h_max, order, lead, derivative)
     out, done = got
@@ -226,7 +253,7 @@ def python_adaptive_fits(
     first_lead = _lead(levels[0], lead)
     lo = np.searchsorted(t, targets + first_lead - 2.0 * levels[0], side="left")
     hi = np.searchsorted(t, targets + first_lead, side="right")
-    white, step = _window_noise(y, lo, hi)
+    white, step = _window_noise(t, y, lo, hi)
     out = [np.empty((len(targets), y.shape[1])) for _ in range(4)]
     for start in range(0, len(targets), BLOCK):  # a block of targets at a time: its levels stay in cache
         part = slice(start, start + BLOCK)
@@ -296,7 +323,7 @@ def adaptive_fit(
     if library is not None:
         got = native_fit.fit(
             library, times, values, target, *_ladder_and_leads(h_max, lead), order, derivative, GAMMA, ROUGHNESS,
-            _SIXTH, FLOOR, GROWTH,
+            _GAIN, FLOOR, GROWTH,
         )  # fmt: skip
         if got is not None:
             return got
@@ -317,7 +344,7 @@ def python_adaptive_fit(
     leads = np.minimum(lead, levels)
     lo = times.searchsorted(target + leads - 2.0 * levels, side="left")
     hi = times.searchsorted(target + leads, side="right")
-    white, step = noise_of(values[lo[0] : hi[0]])
+    white, step = noise_of(times[lo[0] : hi[0]], values[lo[0] : hi[0]])
     counts = (hi - lo).astype(float)
     valid = counts >= order + 3
     window = values[lo[0] : hi[0]]  # the largest window holds every other level's

@@ -104,7 +104,9 @@ class KalmanTrack:
             self.nis = squared / 2.0
         else:  # the position (c + g, states 0 and 3) alone: scalar innovation
             projected = covariance[:, 0] + covariance[:, 3]  # (models, dim)
-            variance = (projected[:, 0] + projected[:, 3] + self._noise)[:, None]  # (models, 1)
+            # the prediction's own part is never negative (P is positive semi-definite): rounding can make
+            # it so on noise-free samples, where the noise read is at its floor
+            variance = (np.maximum(projected[:, 0] + projected[:, 3], 0.0) + self._noise)[:, None]  # (models, 1)
             gain = projected / variance
             innovation = positions - state[:, 0] - state[:, 3]  # (models, m)
             state = state + gain[:, :, None] * innovation[:, None, :]

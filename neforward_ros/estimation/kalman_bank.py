@@ -41,7 +41,11 @@ NOISE_WINDOW = 64
 NOISE_EVERY = 8
 """Samples between two readings of the noise (it changes slowly; reading it costs more than a step)."""
 FALLBACK_NOISE = 1e-4
-"""rad (m): the position noise before enough samples tell it (and its floor: 1e-4 of it)."""
+"""rad (m): the position noise before enough samples tell it."""
+NOISE_FLOOR = 1e-2
+"""The least noise read, relative to the fallback (1e-6 rad for positions, below a 20-bit encoder's
+1.7e-6): a filter trusting noise-free samples further loses its covariance to rounding (the prior's
+variances are 1e2, a noise of 1e-8 rad would be 1e-16) and diverges."""
 FALLBACK_VELOCITY_NOISE = 1e-3
 """rad/s (m/s): likewise for the velocities."""
 
@@ -76,11 +80,12 @@ class KalmanBank:
         self.track = KalmanTrack(models, smooth)
         self.scores: np.ndarray | None = None
         self._weights: np.ndarray | None = None
+        self._origin: int | None = None  # ns: the first stamp
         self.known_scores = known_scores  # (models, joints): the weights before a restart, as log-weights
         self._last: int | None = None
         self._intervals: deque[float] = deque(maxlen=16)  # s: the last intervals between samples
-        self._positions: deque[np.ndarray] = deque(maxlen=NOISE_WINDOW)
-        self._velocities: deque[np.ndarray] = deque(maxlen=NOISE_WINDOW)
+        self._positions: deque[tuple[float, np.ndarray]] = deque(maxlen=NOISE_WINDOW)  # (s, values)
+        self._velocities: deque[tuple[float, np.ndarray]] = deque(maxlen=NOISE_WINDOW)
         self._steps: dict[str, np.ndarray] = {}  # the smallest change seen so far, per joint: an encoder's step
         self.read_noise: dict[str, float] = {}  # the variances read from the samples so far
         self._unread = dict.fromkeys(("positions", "velocities"), 0)  # samples since the noise was read
@@ -99,7 +104,7 @@ class KalmanBank:
             self.known_noise = {kind: self.read_noise.get(kind, known) for kind, known in self.known_noise.items()}
             self._positions.clear()
             self._velocities.clear()
-        self._tune_noise(positions, velocities)
+        self._tune_noise(stamp, positions, velocities)
         likelihoods = self.track.add(stamp, positions, velocities)
         if self.scores is None or self._last is None:
             self.scores = likelihoods if self.known_scores is None else likelihoods + self.known_scores
@@ -161,12 +166,13 @@ class KalmanBank:
         bank.scores = None if self.scores is None else self.scores[:, columns]
         bank._last = self._last
         bank._intervals = deque(self._intervals, maxlen=16)
-        bank._positions = deque((p[columns] for p in self._positions), maxlen=NOISE_WINDOW)
-        bank._velocities = deque((v[columns] for v in self._velocities), maxlen=NOISE_WINDOW)
+        bank._origin = self._origin
+        bank._positions = deque(((t, p[columns]) for t, p in self._positions), maxlen=NOISE_WINDOW)
+        bank._velocities = deque(((t, v[columns]) for t, v in self._velocities), maxlen=NOISE_WINDOW)
         bank._steps = {k: v[columns] for k, v in self._steps.items()}
         return bank
 
-    def _noise(self, kind: str, samples: deque[np.ndarray], fallback: float) -> float:
+    def _noise(self, kind: str, samples: deque[tuple[float, np.ndarray]], fallback: float) -> float:
         """A measurement variance for the whole group: the median of its joints' (white noise, or an
                 encoder's step / sqrt(12)), from the samples kept; the fallback's until there are 32. The
                 step is the smallest change seen since the start, kept through dwells (where no sample
@@ -184,7 +190,7 @@ class KalmanBank:
             self._unread[kind] += 1
             return self.read_noise[kind]
         self._unread[kind] = 0
-        white, step = noise_of(np.stack(samples), coloured=False)
+        white, step = noise_of(np.array([t for t, _ in samples]), np.stack([v for _, v in samples]), coloured=False)
         seen = self._steps.get(kind)
         step = np.where(step > 0.0, step, np.inf)
         seen = step if seen is None else np.minimum(seen, step)
@@ -195,18 +201,21 @@ class KalmanBank:
         if not told.any():
             known = self.known_noise.get(kind)
             return known if known is not None else fallback**2
-        found = float(max(np.median(variance[told]), (fallback * 1e-4) ** 2))
+        found = float(max(np.median(variance[told]), (fallback * NOISE_FLOOR) ** 2))
         self.read_noise[kind] = found
         return found
 
-    def _tune_noise(self, positions: np.ndarray, velocities: np.ndarray) -> None:
+    def _tune_noise(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> None:
         settings = self.settings
+        if self._origin is None:
+            self._origin = stamp
+        seconds = (stamp - self._origin) / NS  # the samples' times, for the noise's divided differences
         if settings.noise == 0:
-            self._positions.append(np.asarray(positions, dtype=float).copy())
+            self._positions.append((seconds, np.asarray(positions, dtype=float).copy()))
             noise = self._noise("positions", self._positions, FALLBACK_NOISE)
             self.track._noise = noise
         if settings.velocity_noise == 0 and np.isfinite(velocities).all():
-            self._velocities.append(np.asarray(velocities, dtype=float).copy())
+            self._velocities.append((seconds, np.asarray(velocities, dtype=float).copy()))
             noise = self._noise("velocities", self._velocities, FALLBACK_VELOCITY_NOISE)
             self.track._velocity_noise = noise
 

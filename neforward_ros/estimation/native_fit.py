@@ -94,6 +94,22 @@ static int spd_inverse(const double *a, long d, double *inv) {
    (n,) 2 or 1. out (5, n): value, first and second derivative, the chosen derivative's standard
    deviation, strained (1 or 0). Returns 0 when done, 1 when the largest window is too small (the
    caller's function serves), 2 when memory runs out. */
+/* the weights of the sixth divided difference of t[0], t[s], ..., t[6 s], scaled to unit norm: the
+   combination of seven samples that vanishes on every polynomial of degree 5 through their stamps */
+static void divided_weights(const double *t, long s, double *w) {
+    double span = t[6 * s] - t[0], x[7], norm = 0.0;
+    if (!(span > 0.0)) span = 1.0;
+    for (long k = 0; k < 7; k++) x[k] = (t[k * s] - t[0]) / span;
+    for (long k = 0; k < 7; k++) {
+        double p = 1.0;
+        for (long j = 0; j < 7; j++) p *= j == k ? 1.0 : x[k] - x[j];
+        w[k] = 1.0 / p;
+        norm += w[k] * w[k];
+    }
+    norm = 1.0 / sqrt(norm);
+    for (long k = 0; k < 7; k++) w[k] *= norm;
+}
+
 int adaptive_fit(long count, const double *times, const double *values, long n, double target,
                  long nlevels, const double *levels, const double *leads, long order,
                  const long *derivative, double gamma, double roughness, double sixth_gain,
@@ -121,35 +137,38 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
         for (long j = 0; j < n; j++) { double c = window[i * n + j] - white[j]; spread[j] += c * c; }
     for (long j = 0; j < n; j++) { spread[j] = sqrt(spread[j] * (1.0 / width)); white[j] = 0.0; }
     if (width >= 8) {
+        const double *wt = times + lo[0];
+        for (long j = 0; j < n; j++) diffs[j] = 0.0;  /* diffs[j]: whether column j holds equal neighbours */
         for (long i = 0; i + 1 < width; i++)
             for (long j = 0; j < n; j++) {
-                double difference = window[(i + 1) * n + j] - window[i * n + j], a = fabs(difference);
-                diffs[i * n + j] = difference;
-                if (a != 0.0 && a < step[j]) step[j] = a;
+                double a = fabs(window[(i + 1) * n + j] - window[i * n + j]);
+                if (a == 0.0) diffs[j] = 1.0;
+                else if (a < step[j]) step[j] = a;
             }
-        for (long pass = 1; pass < 6; pass++)
-            for (long i = 0; i + 1 < width - pass; i++)
-                for (long j = 0; j < n; j++) diffs[i * n + j] = diffs[(i + 1) * n + j] - diffs[i * n + j];
-        for (long i = 0; i < width - 6; i++) for (long j = 0; j < n; j++) white[j] += fabs(diffs[i * n + j]);
-        for (long j = 0; j < n; j++) white[j] *= 1.0 / ((double)(width - 6) * sixth_gain);
-        /* coloured noise: the sixth differences of samples s = 2, 4, 8 ... apart, while they grow at
-           most `growth` times per doubling; a stride's counts once the next one agrees (see noise_of) */
-        double *previous = spread + n, *candidate = previous + n, *alive = candidate + n;
-        for (long j = 0; j < n; j++) { previous[j] = white[j]; alive[j] = 1.0; }
-        for (long s = 2; 6 * s + 8 <= width; s *= 2) {
+        for (long j = 0; j < n; j++) if (diffs[j] == 0.0) step[j] = INFINITY;  /* moves every sample: white */
+        /* noise from the normalised sixth divided differences of samples 1, 2, 4, 8 ... apart (see
+           sixth_differences and noise_of): stride 1 is the white noise; a coloured stride counts
+           while they grow at most `growth` times per doubling, once the next one agrees */
+        double *previous = spread + n, *candidate = previous + n, *alive = candidate + n, weights[7];
+        for (long s = 1; s == 1 || 6 * s + 8 <= width; s *= 2) {
             long terms = width - 6 * s;
             for (long j = 0; j < n; j++) candidate[j] = 0.0;
-            for (long i = 0; i < terms; i++)
+            for (long i = 0; i < terms; i++) {
+                divided_weights(wt + i, s, weights);
                 for (long j = 0; j < n; j++) {
                     const double *y = window + i * n + j;
-                    double x = y[0] + -6.0 * y[s * n] + 15.0 * y[2 * s * n] + -20.0 * y[3 * s * n]
-                               + 15.0 * y[4 * s * n] + -6.0 * y[5 * s * n] + y[6 * s * n];
+                    double x = weights[0] * y[0];
+                    for (long k = 1; k < 7; k++) x = x + weights[k] * y[k * s * n];
                     candidate[j] += fabs(x);
                 }
+            }
             for (long j = 0; j < n; j++) {
                 double noise = candidate[j] / ((double)terms * sixth_gain);
-                alive[j] = alive[j] > 0.0 && noise <= growth * previous[j] ? 1.0 : 0.0;
-                if (alive[j] > 0.0 && previous[j] > white[j]) white[j] = previous[j];  /* confirmed by s */
+                if (s == 1) { white[j] = noise; alive[j] = 1.0; }
+                else {
+                    alive[j] = alive[j] > 0.0 && noise <= growth * previous[j] ? 1.0 : 0.0;
+                    if (alive[j] > 0.0 && previous[j] > white[j]) white[j] = previous[j];  /* confirmed by s */
+                }
                 previous[j] = noise;
             }
         }

@@ -81,8 +81,10 @@ class Client(Node):
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             clock_matched = self.clock is None or self.clock.get_subscription_count()  # sim time: the node's /clock
-            if self.publisher.get_subscription_count() and clock_matched and all(
-                s.get_publisher_count() for s in self.recorders
+            if (
+                self.publisher.get_subscription_count()
+                and clock_matched
+                and all(s.get_publisher_count() for s in self.recorders)
             ):
                 self.spin_for(0.5)  # the other side of the match
                 return True
