@@ -81,7 +81,8 @@ class KalmanTrack:
             state = transition @ last.filtered
             covariance = transition @ last.covariance @ transition.transpose(0, 2, 1) + noise
             if self.smooth:
-                gain = np.linalg.solve(covariance, transition @ last.covariance).transpose(0, 2, 1)
+                # G = P_f F^T P_pred^-1 (an explicit inverse: numpy's batched solve costs more at this size)
+                gain = (last.covariance @ transition.transpose(0, 2, 1)) @ np.linalg.inv(covariance)
                 last.gain, last.offset = gain, last.filtered - gain @ state
                 if self._unrolled is not None:
                     self._unrolled.advance(gain, last.offset)
