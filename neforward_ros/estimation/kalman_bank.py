@@ -14,7 +14,8 @@ move), the weights follow within a fraction of a second. An explicit ``length_sc
 model alone.
 
 The position noise, unless given, is read from the samples as the polynomial fits read it
-(:func:`neforward_ros.estimation.adaptive.noise_of`): white noise from the sixth differences, an
+(:func:`neforward_ros.estimation.adaptive.noise_of`): white noise from the sixth divided differences
+on the samples' stamps, an
 encoder's step from the smallest non-zero change since the start (through dwells, where no sample
 changes), white noise over the last :data:`NOISE_WINDOW` samples, read again every
 :data:`NOISE_EVERY` samples; the velocity noise likewise from the velocities the messages carry.
@@ -91,7 +92,7 @@ class KalmanBank:
         self._unread = dict.fromkeys(("positions", "velocities"), 0)  # samples since the noise was read
 
     @property
-    def steps(self):  # the steps of the first track (the stamps all tracks share)
+    def steps(self):  # the filter's steps (one per sample; every model shares the stamps)
         return self.track.steps
 
     def add(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> None:
