@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 
+from neforward_ros.estimation import kalman
 from neforward_ros.estimation.coverage import Support, covered_mask, uncovered
 from neforward_ros.estimation.kalman import KalmanTrack
 from neforward_ros.estimation.motion import ORDER, TREND_JERK, KalmanSettings, MotionModel
@@ -338,13 +339,18 @@ def _dense_posterior(model: MotionModel, times: np.ndarray, measured_at: np.ndar
 
 @pytest.mark.parametrize("lag_samples", [0, 7])
 @pytest.mark.parametrize("with_velocities", [False, True])
+@pytest.mark.parametrize("unrolled", [None, 4])
 def test_kalman_filter_and_smoother_equal_dense_gaussian_process_regression(
-    lag_samples: int, with_velocities: bool
+    lag_samples: int, with_velocities: bool, unrolled: int | None, monkeypatch
 ) -> None:
     """The recursive estimates (filter, fixed-lag smoother) of a bank of two models run as one batched
     filter, against each model's posterior mean computed in one dense solve over every sample (no
     recursion), from positions alone or with measured velocities; at the samples' stamps and at a
-    stamp between two samples (carried forward from the step before it)."""
+    stamp between two samples (carried forward from the step before it). With ``unrolled`` 4, the
+    smoothed estimates 7 samples back are older than the unrolled ones and go back step by step; a
+    third of the way the track is copied by ``select`` (its history with it)."""
+    if unrolled is not None:
+        monkeypatch.setattr(kalman, "UNROLLED", unrolled)
     settings = [
         KalmanSettings(noise=1e-3, velocity_noise=1e-2, length_scale=scale, magnitude=0.4) for scale in (0.3, 0.08)
     ]
@@ -394,4 +400,6 @@ def test_kalman_filter_and_smoother_equal_dense_gaussian_process_regression(
                 tolerance = 1e-5 if node == middle + 1 else 1e-6
                 assert np.all(np.abs(got[m] - expected) <= tolerance * scale), (k, m, stamp, got[m], expected)
         track.forget_before(int(stamps[target]))
+        if k == count // 3:
+            track = track.select([0, 1])
     assert checked_between == lag_samples + 1

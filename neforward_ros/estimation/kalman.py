@@ -14,9 +14,10 @@ the smoother gain G_k and offset o_k (the filtered state less G_k times the next
 known once the next sample is in. Unrolled from the newest sample N, the read-out (position,
 velocity, acceleration) of x_k is R x_k = c_k + P_k xf_N, with c_k and P_k = R G_k ... G_(N-1) kept
 for every step: when a sample N + 1 arrives, every c_k gains P_k o_N and every P_k becomes P_k G_N,
-two batched products for all the steps kept, and an estimate at a step is one product more. An
-estimate between steps (a stamp whose sample was not filtered) goes back step by step and carries
-the state forward to it.
+two batched products for all the steps kept (at most :data:`UNROLLED`: older steps, which only a
+caller that never forgets keeps, go back step by step), and an estimate at a step is one product
+more. An estimate between steps (a stamp whose sample was not filtered) goes back step by step and
+carries the state forward to it.
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ from neforward_ros.estimation.motion import MotionModel, MotionModels
 from neforward_ros.stamps import NS
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
+UNROLLED = 1024
+"""The most steps whose smoothed read-out is kept unrolled (a 20 ms lag at 1 kHz needs 21)."""
 
 
 @dataclass
@@ -138,8 +141,7 @@ class KalmanTrack:
         if index < len(steps) - 1:
             if not self.smooth:  # the filtered state
                 state = steps[index].filtered
-            elif at_step:
-                assert self._unrolled is not None
+            elif at_step and self._unrolled is not None and index >= self._unrolled.skipped:
                 offsets, products = self._unrolled.at(index)
                 return offsets + products @ state
             else:
@@ -164,16 +166,18 @@ class KalmanTrack:
             steps.popleft()
             dropped += 1
         if dropped and self._unrolled is not None:
-            self._unrolled.start += dropped
+            self._unrolled.forget(dropped)
 
     def select(self, columns: list[int]) -> KalmanTrack:
         """A track of these state columns only, with the same history."""
         track = KalmanTrack(self.models, self.smooth)
         track._noise, track._velocity_noise = self._noise, self._velocity_noise
         for step in self.steps:
+            offset = None if step.offset is None else step.offset[:, :, columns]
             track.steps.append(
-                _Step(step.stamp, step.filtered[:, :, columns], step.predicted[:, :, columns], step.covariance)
-            )
+                _Step(step.stamp, step.filtered[:, :, columns], step.predicted[:, :, columns], step.covariance,
+                      step.gain, offset)
+            )  # fmt: skip
         track._unrolled = None if self._unrolled is None else self._unrolled.select(columns)
         return track
 
@@ -188,9 +192,13 @@ class _Unrolled:
         self.offsets = np.zeros((models, capacity, 3, joints))
         self.products = np.zeros((models, capacity, 3, dim))
         self.start = self.end = 0
+        self.skipped = 0  # the oldest steps kept without a row (past UNROLLED)
 
     def append(self) -> None:
         """A new newest step: c = 0, P = R."""
+        if self.end - self.start >= UNROLLED:
+            self.start += 1
+            self.skipped += 1
         if self.end == self.offsets.shape[1]:
             kept = self.end - self.start
             if 2 * kept > self.offsets.shape[1]:
@@ -212,12 +220,19 @@ class _Unrolled:
         self.products[:, live] = (products @ gain).reshape(models, -1, 3, dim)
 
     def at(self, index: int) -> tuple[np.ndarray, np.ndarray]:
-        """(c, P) of the step ``index`` among those kept."""
-        return self.offsets[:, self.start + index], self.products[:, self.start + index]
+        """(c, P) of the step ``index`` among those kept (at least :attr:`skipped`)."""
+        row = self.start + index - self.skipped
+        return self.offsets[:, row], self.products[:, row]
+
+    def forget(self, count: int) -> None:
+        """The oldest ``count`` steps are dropped."""
+        unrolled = max(count - self.skipped, 0)
+        self.skipped = max(self.skipped - count, 0)
+        self.start += unrolled
 
     def select(self, columns: list[int]) -> _Unrolled:
         unrolled = _Unrolled(self.readout, len(columns), self.offsets.shape[1])
         unrolled.offsets = self.offsets[..., columns]
         unrolled.products = self.products.copy()
-        unrolled.start, unrolled.end = self.start, self.end
+        unrolled.start, unrolled.end, unrolled.skipped = self.start, self.end, self.skipped
         return unrolled
