@@ -108,10 +108,15 @@ OUTPUTS = ["out", "out.csv", "out.png"]
 
 
 def interpreter_start(code: int, output: str) -> bool:
-    """Whether the signal ended the interpreter's own start-up, before any code of the package ran."""
-    return (code == -signal.SIGINT and output.strip() == "") or (
-        code == 1 and "Fatal Python error: init_import_site" in output and "neforward_ros/" not in output
-    )
+    """Whether the signal ended the interpreter's own start-up, before any code of the package ran
+    (silently, in site's imports, or while runpy still looks for the module: its own traceback)."""
+    before_package = "neforward_ros/" not in output
+    return (
+        (code == -signal.SIGINT and output.strip() == "")
+        or (code == 1 and "Fatal Python error: init_import_site" in output and before_package)
+        or (code in (1, -signal.SIGINT) and "KeyboardInterrupt" in output and "<frozen runpy>" in output
+            and before_package)
+    )  # fmt: skip
 
 
 def check_bag_outcome(run: Interrupted, folder: Path, arguments: list[str], where: str) -> bool:
