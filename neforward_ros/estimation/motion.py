@@ -124,33 +124,17 @@ class MotionModel:
         self.readout[0] = self.position_row
         self.readout[1] = self.velocity_row
         self.readout[2, [2, 5]] = (1.0, lam * lam)
-        self._transitions: dict[float, tuple[np.ndarray, np.ndarray]] = {}  # see transition()
         self.prior = np.zeros((self.dim, self.dim))
         self.prior[:3, :3] = np.diag(np.square(TREND_PRIOR))
         self.prior[3:, 3:] = self._stationary
+        self._as_bank = MotionModels([self])  # see transition()
 
     def transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """(F, Q) over dt seconds: x(t + dt) = F x(t) + w, w ~ N(0, Q). Kept for the intervals seen
-        last (a steady rate has one or two): read-only arrays."""
-        cache = self._transitions
-        found = cache.get(dt)
-        if found is None:
-            if len(cache) >= 64:
-                cache.clear()
-            found = cache[dt] = self._transition(dt)
-            for array in found:
-                array.flags.writeable = False
-        return found
-
-    def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        n = ORDER
-        transition = np.zeros((self.dim, self.dim))
-        noise = np.zeros((self.dim, self.dim))
-        transition[:3, :3], noise[:3, :3] = _trend(dt)
-        # Matern part: exp(A dt) = exp(-lam dt) sum_k N^k dt^k / k!, and Q as a sum of gamma terms.
-        transition[3:, 3:] = (self._powers_flat @ (dt**self._exponents)).reshape(n, n) * math.exp(-self.lam * dt)
-        noise[3:, 3:] = (self._noise_terms @ _lower_gamma_regularized(2 * n - 1, 2.0 * self.lam * dt)).reshape(n, n)
-        return transition, noise
+        last (a steady rate has one or two): read-only arrays. Worked out as a bank of one model
+        (:class:`MotionModels`), the arithmetic the filter runs."""
+        transition, noise = self._as_bank.transition(dt)
+        return transition[0], noise[0]
 
 
 class MotionModels:
@@ -239,16 +223,14 @@ def _trend(dt: float) -> tuple[np.ndarray, np.ndarray]:
 _RECIPROCALS = 1.0 / np.arange(1, 4097)
 
 
-def _lower_gamma_regularized(count: int, x: float | np.ndarray) -> np.ndarray:
-    """P(m + 1, x) for m = 0 .. count - 1: exp(-x) sum_{j > m} x^j / j!, summed from the tail up (all
-    terms positive, so accurate for small and large x alike); for an array of x (M,), (M, count)."""
-    values = np.atleast_1d(np.asarray(x, dtype=float))
-    largest = float(values.max())
+def _lower_gamma_regularized(count: int, x: np.ndarray) -> np.ndarray:
+    """P(m + 1, x) for m = 0 .. count - 1 and each x (M,): exp(-x) sum_{j > m} x^j / j!, (M, count),
+    summed from the tail up (all terms positive, so accurate for small and large x alike)."""
+    largest = float(x.max())
     terms = min(count + int(largest + 10.0 * math.sqrt(largest) + 25.0), len(_RECIPROCALS))
-    series = np.cumprod(values[:, None] * _RECIPROCALS[:terms], axis=1)  # x^j / j!, j = 1 .. terms
+    series = np.cumprod(x[:, None] * _RECIPROCALS[:terms], axis=1)  # x^j / j!, j = 1 .. terms
     tails = np.cumsum(series[:, ::-1], axis=1)[:, ::-1]  # sum_{i >= j} x^i / i!
-    out = np.exp(-values)[:, None] * tails[:, :count]
-    return out if np.ndim(x) else out[0]
+    return np.exp(-x)[:, None] * tails[:, :count]
 
 
 def _stationary_covariance(generator: np.ndarray) -> np.ndarray:
