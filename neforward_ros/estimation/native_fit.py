@@ -123,9 +123,9 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
     }
     if (valid == 0) return 1;
     long width = hi[0] - lo[0];
-    double *scratch = malloc(sizeof(double) * ((size_t)width * n + d * n + 5 * (size_t)valid * n + 6 * n));
+    double *scratch = malloc(sizeof(double) * (n + d * n + 5 * (size_t)valid * n + 6 * n));
     if (scratch == NULL) return 2;
-    double *diffs = scratch, *moments = diffs + (size_t)width * n, *fits = moments + d * n;
+    double *equal = scratch, *moments = equal + n, *fits = moments + d * n;
     double *white = fits + 5 * (size_t)valid * n, *step = white + n, *spread = step + n;
     /* the noise, from the largest window, every column at once (rows are contiguous): the samples'
        deviation, the mean |sixth difference|, the smallest non-zero step */
@@ -138,14 +138,14 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
     for (long j = 0; j < n; j++) { spread[j] = sqrt(spread[j] * (1.0 / width)); white[j] = 0.0; }
     if (width >= 8) {
         const double *wt = times + lo[0];
-        for (long j = 0; j < n; j++) diffs[j] = 0.0;  /* diffs[j]: whether column j holds equal neighbours */
+        for (long j = 0; j < n; j++) equal[j] = 0.0;  /* whether column j holds equal neighbours */
         for (long i = 0; i + 1 < width; i++)
             for (long j = 0; j < n; j++) {
                 double a = fabs(window[(i + 1) * n + j] - window[i * n + j]);
-                if (a == 0.0) diffs[j] = 1.0;
+                if (a == 0.0) equal[j] = 1.0;
                 else if (a < step[j]) step[j] = a;
             }
-        for (long j = 0; j < n; j++) if (diffs[j] == 0.0) step[j] = INFINITY;  /* moves every sample: white */
+        for (long j = 0; j < n; j++) if (equal[j] == 0.0) step[j] = INFINITY;  /* moves every sample: white */
         /* noise from the normalised sixth divided differences of samples 1, 2, 4, 8 ... apart (see
            sixth_differences and noise_of): stride 1 is the white noise; a coloured stride counts
            while they grow at most `growth` times per doubling, once the next one agrees */
