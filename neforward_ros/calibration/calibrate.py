@@ -36,11 +36,20 @@ from neforward_ros.bag.read import Recording, read
 from neforward_ros.calibration.fit import JointFit, Windows, fit_joints, windows
 from neforward_ros.calibration.inertial import Identified, identify
 from neforward_ros.calibration.payload import Payload, fit_payload, payload_models
-from neforward_ros.calibration.thresholds import Excursion, debounce_over, excursions, robust_thresholds
+from neforward_ros.calibration.thresholds import (
+    MIN_REST,
+    Excursion,
+    debounce_over,
+    excursions,
+    rest_thresholds,
+    robust_thresholds,
+)
 from neforward_ros.computation.compute import ComputeState, observe_raw
+from neforward_ros.computation.contact import REST_DWELL, ContactDetector
 from neforward_ros.computation.observer import RawStates
 from neforward_ros.errors import InputError
 from neforward_ros.kinematics.joint_space import momentum_values
+from neforward_ros.logs import ThrottledLog
 from neforward_ros.parameters.settings import node_settings
 
 RELEASE = 0.6
@@ -68,6 +77,8 @@ class Calibration:
         payload: the payload fitted (``--payload``), or None.
         outliers: the stretches of the free motion over the thresholds (:mod:`.thresholds`).
         identified: the inertial parameters identified (:mod:`.inertial`), or None.
+        rest_thresholds: each joint's rest threshold (:mod:`.thresholds`), or None where the
+            recordings do not hold the arm still long enough.
     """
 
     joint_names: tuple[str, ...]
@@ -82,6 +93,7 @@ class Calibration:
     payload: Payload | None = None
     outliers: list[Excursion] = field(default_factory=list)
     identified: Identified | None = None
+    rest_thresholds: np.ndarray | None = None
 
 
 def calibrate(
@@ -189,6 +201,7 @@ def calibrate(
     fitted["publish_torques"] = True
     fitted.pop("contact.joint_names", None)
     fitted.pop("contact.thresholds", None)
+    fitted.pop("contact.rest_thresholds", None)
     progress("thresholds", 0.0)
     given = {**original, "publish_torques": True}
     before = _external(recordings, _options(given, urdf, joint_states_topic), raws).external
@@ -218,6 +231,9 @@ def calibrate(
     fitted["contact.joint_names"] = [name for name, ok in zip(names, measured, strict=True) if ok]
     fitted["contact.thresholds"] = [float(f"{x:.4g}") for x, ok in zip(thresholds, measured, strict=True) if ok]
     fitted["contact.release"] = RELEASE
+    rest = _rest_thresholds(free, names, measured) if method == "observer" else None
+    if rest is not None:
+        fitted["contact.rest_thresholds"] = [float(f"{x:.4g}") for x, ok in zip(rest, measured, strict=True) if ok]
     least = 0.0
     if method == "observer":
         gains = np.array([fitted_options.settings.observer_gains.get(n, fitted_options.settings.observer_gain)
@@ -247,6 +263,12 @@ def calibrate(
         )
     notes += [] if identified is None else identified.notes
     notes += _outlier_notes(outliers, names, [str(p) for p in inputs], fitted.get("contact.debounce"))
+    if method == "observer" and rest is None:
+        notes.append(
+            f"these recordings do not hold the arm still (every joint slower than its friction's velocity scale for "
+            f"{REST_DWELL:g} s, {MIN_REST} samples in all): no contact.rest_thresholds, so a push on a still arm must "
+            "pass contact.thresholds and the static friction; record a few seconds at rest to measure them"
+        )
     return Calibration(
         names,
         fits,
@@ -260,6 +282,7 @@ def calibrate(
         found_payload,
         outliers,
         identified,
+        rest,
     )
 
 
@@ -423,6 +446,7 @@ class FreeMotion:
         external: (T, n) N m (N), NaN where unknown.
         stamps: (T,) int ns; velocity: (T, n) the joint velocities there; recording: (T,) its index.
         method: how they are estimated (observer or difference).
+        still: (T,) whether the arm is still there (the observer's; False with the difference).
     """
 
     external: np.ndarray
@@ -430,12 +454,13 @@ class FreeMotion:
     velocity: np.ndarray
     recording: np.ndarray
     method: str
+    still: np.ndarray
 
 
 def _external(recordings: list[Recording], options: BagOptions, raws: list[tuple[Any, bool | None]]) -> FreeMotion:
     """The external torques the node publishes on the recordings with these options; ``raws``: each
     recording's :func:`raw_states` (states, velocities)."""
-    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int]] = []
+    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray, int, np.ndarray]] = []
     method = "difference"
     for k, (recording, (raw, velocities)) in enumerate(zip(recordings, raws, strict=True)):
         model = options.settings.model_of(recording.model)
@@ -447,22 +472,37 @@ def _external(recordings: list[Recording], options: BagOptions, raws: list[tuple
             if raw is not None:
                 observed = observe_raw(model, options.settings, raw, state)
                 assert observed is not None
-                parts.append((observed.external, np.asarray(observed.stamp_ns), raw.qd, k))
+                stamps = np.asarray(observed.stamp_ns)
+                parts.append((observed.external, stamps, raw.qd, k, np.asarray(observed.still, dtype=bool)))
             continue
         inputs = prepare_inputs(recording, options, lambda what, fraction: None)
         for result, _, _ in results(model, inputs, options, [], state):
             if result is not None and result.dynamics is not None:
-                parts.append((result.dynamics.external, result.stamp_ns, result.dynamics.qd, k))
+                stamps = np.asarray(result.stamp_ns)
+                parts.append((result.dynamics.external, stamps, result.dynamics.qd, k, np.zeros(len(stamps), bool)))
     n = len(recordings[0].model.joint_names)
     if not parts:
-        return FreeMotion(np.zeros((0, n)), np.zeros(0, np.int64), np.zeros((0, n)), np.zeros(0, np.int64), method)
+        empty = np.zeros(0, np.int64)
+        return FreeMotion(np.zeros((0, n)), empty, np.zeros((0, n)), empty, method, np.zeros(0, bool))
     return FreeMotion(
         np.concatenate([p[0] for p in parts]),
         np.concatenate([p[1] for p in parts]).astype(np.int64),
         np.concatenate([p[2] for p in parts]),
         np.concatenate([np.full(len(p[1]), p[3], dtype=np.int64) for p in parts]),
         method,
+        np.concatenate([p[4] for p in parts]),
     )
+
+
+def _rest_thresholds(free: FreeMotion, names: Sequence[str], measured: np.ndarray) -> np.ndarray | None:
+    """The rest thresholds of this free motion (:func:`.thresholds.rest_thresholds`): the departures
+    from the rest baseline that the node's detector would watch, recording by recording."""
+    departures = np.full(free.external.shape, np.nan)
+    for k in np.unique(free.recording).tolist():
+        rows = free.recording == k
+        detector = ContactDetector(np.full(len(names), np.inf), 0.0, tuple(names), ThrottledLog(None))
+        departures[rows] = detector.rest_departures(free.stamps[rows], free.external[rows], free.still[rows])
+    return rest_thresholds(departures, measured)
 
 
 def _rms(external: np.ndarray) -> np.ndarray:

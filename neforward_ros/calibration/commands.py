@@ -122,6 +122,13 @@ def describe(found: Calibration, output: Path) -> str:
         f"ones; threshold: {MARGIN:g} x the largest {100 * QUANTILE:g}th percentile of its |external torque| over "
         "three speed ranges)"
     )
+    if found.rest_thresholds is not None:
+        pairs = zip(found.joint_names, found.rest_thresholds.tolist(), strict=True)
+        rest = [f"{n} {t:.3g}" for n, t in pairs if t == t]  # NaN: not watched
+        rows.append(
+            f"rest thresholds (the departure from a still arm's baseline, {MARGIN:g} x its {100 * QUANTILE:g}th "
+            f"percentile where these recordings hold still): {', '.join(rest)}"
+        )
     if found.identified is not None and found.identified.links:
         ident = found.identified
         told = int(ident.told.sum())

@@ -14,6 +14,12 @@ everything else, and a threshold set by one of them makes detection blind. So, p
   and time. The contact debounce is made longer than the longest excursion up to
   :data:`MAX_DEBOUNCE` (one sample interval more), so that what the free motion did raises no
   contact; a longer stretch over the thresholds is said (a contact during the calibration motion?).
+
+Where the recordings hold the arm still (every joint slower than its friction's velocity scale for
+:data:`neforward_ros.computation.contact.REST_DWELL`), the rest thresholds are measured the same way
+on what the detector's rest test watches there, the external torques' departure from their baseline
+(:mod:`neforward_ros.computation.contact`): :data:`MARGIN` times its :data:`QUANTILE` quantile, from at
+least :data:`MIN_REST` samples at rest.
 """
 
 from __future__ import annotations
@@ -34,6 +40,8 @@ MIN_BIN = 200
 """The fewest samples a speed group has; fewer samples make one group."""
 FLOOR = 0.05
 """N m (N): the least contact threshold."""
+MIN_REST = 100
+"""The fewest samples at rest the rest thresholds are measured on."""
 MAX_DEBOUNCE = 0.1
 """s: the longest debounce chosen to ride over the free motion's excursions."""
 
@@ -80,6 +88,19 @@ def robust_thresholds(external: np.ndarray, velocity: np.ndarray, watched: np.nd
         order = np.argsort(speeds, kind="stable")
         level = max(float(np.quantile(values[part], QUANTILE)) for part in np.array_split(order, groups))
         out[j] = max(MARGIN * level, FLOOR)
+    return out
+
+
+def rest_thresholds(departures: np.ndarray, watched: np.ndarray) -> np.ndarray | None:
+    """Per joint, the rest threshold (see the module docstring) from the free motion's departures
+    from the rest baseline ((T, n), NaN where the arm is not at rest); None where fewer than
+    :data:`MIN_REST` samples are at rest; NaN for joints not ``watched``."""
+    out = np.full(departures.shape[1], np.nan)
+    for j in np.flatnonzero(watched):
+        values = np.abs(departures[np.isfinite(departures[:, j]), j])
+        if len(values) < MIN_REST:
+            return None
+        out[j] = max(MARGIN * float(np.quantile(values, QUANTILE)), FLOOR)
     return out
 
 

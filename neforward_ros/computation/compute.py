@@ -78,7 +78,12 @@ class ComputeState:
         contact = None
         if settings.contact_thresholds:
             thresholds = np.array([settings.contact_thresholds.get(n, np.nan) for n in names])
-            contact = ContactDetector(thresholds, settings.contact_debounce, names, throttled, settings.contact_release)
+            rest = None
+            if settings.contact_rest_thresholds:
+                rest = np.array([settings.contact_rest_thresholds.get(n, np.nan) for n in names])
+            contact = ContactDetector(
+                thresholds, settings.contact_debounce, names, throttled, settings.contact_release, rest
+            )
         friction = settings.friction
         effort = EffortModel.of(
             names,
@@ -222,17 +227,22 @@ def observe_raw(model: RobotModel, settings: NodeSettings, raw: RawStates, state
     if state.observer is None or state.method != "observer":
         return None
     external, filtered = observe(model, raw, state.effort, state.observer)
+    still = state.effort.still(filtered)
     contact = None
     if state.contact is not None:
         slack = settings.contact_static_friction * state.effort.static_friction(filtered)
         if raw.single:
-            contact = state.contact.update(raw.stamps, external, slack) if np.isfinite(external).any() else None
+            known = np.isfinite(external).any()
+            contact = state.contact.update(raw.stamps, external, slack, bool(still)) if known else None
         else:
-            contact = state.contact.update_many(raw.stamps, external, np.isfinite(external).any(axis=-1), slack)
+            usable = np.isfinite(external).any(axis=-1)
+            contact = state.contact.update_many(raw.stamps, external, usable, slack, still)
     wrench = None
     if settings.contact_link and settings.contact_link in model.link_index:
         wrench = wrench_at_link(model, raw.q, external, settings.contact_link)
-    return Observation(raw.stamps, model.joint_names, raw.q, raw.qd, external, contact, wrench, settings.contact_link)
+    return Observation(
+        raw.stamps, model.joint_names, raw.q, raw.qd, external, contact, wrench, settings.contact_link, still
+    )
 
 
 def imu_covariances(

@@ -12,6 +12,17 @@ seconds, and false again when none has been for ``debounce`` seconds: a spike sh
 (noise, a stick-slip) changes nothing. The detector is the computation's state that runs on from
 one stamp to the next (the node holds one for its run, the bag tool one per recording), fed in
 stamp order.
+
+**At rest**, with ``rest_thresholds`` (``contact.rest_thresholds``, which ``neforward calibrate``
+measures where its recordings hold still): once every joint has been slower than its friction's
+velocity scale for :data:`REST_DWELL`, the arm is still, and what the model cannot tell there is
+constant: the static friction each joint is stuck with, the gravity model's error in this pose. Each
+joint's external torque when the arm came to rest is its *baseline*, and a joint is over when its
+external torque departs from that baseline by more than its rest threshold (a push on a held arm,
+far smaller than the moving thresholds and the static-friction band). Out of contact the baseline
+follows the external torque with the time constant :data:`BASELINE_TIME` (a controller's slow
+settling is not a push); in contact it stays, so that the contact ends when the torques come back.
+The first motion ends the rest: the moving thresholds apply again.
 """
 
 from __future__ import annotations
@@ -23,6 +34,12 @@ import numpy as np
 from neforward_ros.logs import ThrottledLog
 from neforward_ros.stamps import NS
 
+REST_DWELL = 0.2
+"""s every joint must have been slower than its friction's velocity scale before the rest test applies
+(a reversal passes through rest far quicker)."""
+BASELINE_TIME = 1.0
+"""s: the time constant with which a still arm's baseline follows its external torques out of contact."""
+
 
 class ContactDetector:
     """The debounced contact state of a stream of external torques.
@@ -33,6 +50,8 @@ class ContactDetector:
         joint_names: for the log.
         log: where transitions and missing efforts are said.
         release: in contact, the fraction of its threshold a joint must stay over (1: no hysteresis).
+        rest_thresholds: (n,) the thresholds of the departure from the baseline while the arm is
+            still, N m (N); None (or NaN for a watched joint): no rest test.
     """
 
     def __init__(
@@ -42,6 +61,7 @@ class ContactDetector:
         joint_names: tuple[str, ...],
         log: ThrottledLog,
         release: float = 1.0,
+        rest_thresholds: np.ndarray | None = None,
     ) -> None:
         self.thresholds = np.asarray(thresholds, dtype=float)
         self.release = float(release)
@@ -51,10 +71,54 @@ class ContactDetector:
         self.state = False
         self._since: int | None = None  # stamp from which the other state has held
         self._log = log
+        rest = None if rest_thresholds is None else np.asarray(rest_thresholds, dtype=float)
+        self.rest_thresholds = rest if rest is not None and np.isfinite(rest[self.watched]).all() else None
+        self._still_since: int | None = None  # stamp from which the arm has been still
+        self._baseline: np.ndarray | None = None  # the still arm's external torques
+        self._stamp: int | None = None
 
-    def update(self, stamp_ns: int, external: np.ndarray, slack: np.ndarray | None = None) -> bool | None:
+    def _departure(self, stamp_ns: int, external: np.ndarray, still: bool) -> np.ndarray | None:
+        """The external torques' departure from the rest baseline at this stamp; None while the arm is
+        not (yet) at rest."""
+        if not still:
+            self._still_since = self._baseline = None
+            return None
+        if self._still_since is None:
+            self._still_since = stamp_ns
+        if stamp_ns - self._still_since < REST_DWELL * NS:
+            return None
+        if self._baseline is None:
+            self._baseline = external.copy()
+        self._baseline = np.where(np.isfinite(self._baseline), self._baseline, external)
+        return external - self._baseline
+
+    def _follow(self, stamp_ns: int, external: np.ndarray) -> None:
+        """The baseline follows the external torques (out of contact, nothing over)."""
+        assert self._baseline is not None
+        if self._stamp is not None and stamp_ns > self._stamp:
+            a = min(1.0, (stamp_ns - self._stamp) / (BASELINE_TIME * NS))
+            moved = self._baseline + a * (external - self._baseline)
+            self._baseline = np.where(np.isfinite(external), moved, self._baseline)
+
+    def rest_departures(self, stamps: np.ndarray, external: np.ndarray, still: np.ndarray) -> np.ndarray:
+        """(T, n) the departures from the rest baseline a contact-free stream of external torques
+        (T, n) would have, NaN where the arm is not at rest: what the rest thresholds must stay above
+        (the calibration's measure). The detector's rest state runs on."""
+        out = np.full(external.shape, np.nan)
+        for i, stamp in enumerate(stamps.tolist()):
+            departure = self._departure(int(stamp), external[i], bool(still[i]))
+            if departure is not None:
+                out[i] = departure
+                self._follow(int(stamp), external[i])
+            self._stamp = int(stamp)
+        return out
+
+    def update(
+        self, stamp_ns: int, external: np.ndarray, slack: np.ndarray | None = None, still: bool | None = None
+    ) -> bool | None:
         """The state at this stamp, or None when no watched joint has a measured effort; ``slack``
-        (n,): added to the thresholds at this stamp, out of contact."""
+        (n,): added to the thresholds at this stamp, out of contact; ``still``: whether every joint is
+        slower than its friction's velocity scale (None: unknown, no rest test)."""
         measured = self.watched & np.isfinite(external)
         if not measured.any():
             self._log.once(
@@ -65,12 +129,24 @@ class ContactDetector:
                 "their joint states carry none",
             )
             return None
-        if self.state:
-            thresholds = self.release * self.thresholds
+        departure = None
+        if self.rest_thresholds is not None and still is not None:
+            departure = self._departure(stamp_ns, external, still)
+        if departure is not None:
+            assert self.rest_thresholds is not None
+            values = departure
+            thresholds = self.release * self.rest_thresholds if self.state else self.rest_thresholds
         else:
-            thresholds = self.thresholds if slack is None else self.thresholds + slack
-        over = measured & (np.abs(np.where(measured, external, 0.0)) > np.where(measured, thresholds, 0.0))
+            values = external
+            if self.state:
+                thresholds = self.release * self.thresholds
+            else:
+                thresholds = self.thresholds if slack is None else self.thresholds + slack
+        over = measured & (np.abs(np.where(measured, values, 0.0)) > np.where(measured, thresholds, 0.0))
         now = bool(over.any())
+        if departure is not None and not now and not self.state:
+            self._follow(stamp_ns, external)
+        self._stamp = stamp_ns
         if now == self.state:
             self._since = None
         elif self._since is None:
@@ -78,18 +154,30 @@ class ContactDetector:
         if now != self.state and stamp_ns - self._since >= self.debounce_ns:
             self.state = now
             self._since = None
+            if not now:
+                self._still_since = self._baseline = None  # a released arm settles anew: a new rest
             joints = ", ".join(n for n, o in zip(self.joint_names, over, strict=True) if o)
             self._log.log(logging.INFO, f"contact: {'joint(s) ' + joints + ' over threshold' if now else 'none'}")
         return self.state
 
     def update_many(
-        self, stamps: np.ndarray, external: np.ndarray, usable: np.ndarray, slack: np.ndarray | None = None
+        self,
+        stamps: np.ndarray,
+        external: np.ndarray,
+        usable: np.ndarray,
+        slack: np.ndarray | None = None,
+        still: np.ndarray | None = None,
     ) -> np.ndarray:
         """The states at T stamps, in order: (T,) 1.0 or 0.0, NaN where not ``usable`` (a stamp without
-        every joint's state) or no watched joint has a measured effort; ``slack`` (T, n) as for
-        :meth:`update`."""
+        every joint's state) or no watched joint has a measured effort; ``slack`` (T, n) and ``still``
+        (T,) as for :meth:`update`."""
         out = np.full(len(stamps), np.nan)
         for i in np.flatnonzero(usable):
-            state = self.update(int(stamps[i]), external[i], None if slack is None else slack[i])
+            state = self.update(
+                int(stamps[i]),
+                external[i],
+                None if slack is None else slack[i],
+                None if still is None else bool(still[i]),
+            )
             out[i] = np.nan if state is None else float(state)
         return out

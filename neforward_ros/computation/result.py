@@ -94,6 +94,8 @@ class Observation:
         wrench: (..., 6) ~/contact_wrench's force and moment at ``link``'s origin, in its frame; None
             without ``contact.link``.
         link: the link of ``wrench``.
+        still: whether every joint is slower than its friction's velocity scale (its filtered
+            velocity; (T,) for many samples): where the contact's rest test may apply.
     """
 
     stamp_ns: Any
@@ -104,6 +106,7 @@ class Observation:
     contact: Any = None
     wrench: np.ndarray | None = None
     link: str = ""
+    still: Any = None
 
     def sample(self, index: int) -> Observation:
         """One sample of a batch."""
@@ -118,6 +121,7 @@ class Observation:
             external=self.external[index],
             contact=contact,
             wrench=None if self.wrench is None else self.wrench[index],
+            still=None if self.still is None else bool(self.still[index]),
         )
 
     def part(self, index: Any) -> Observation:
@@ -130,6 +134,7 @@ class Observation:
             external=self.external[index],
             contact=None if self.contact is None else self.contact[index],
             wrench=None if self.wrench is None else self.wrench[index],
+            still=None if self.still is None else self.still[index],
         )
 
 

@@ -89,6 +89,11 @@ class EffortModel:
             return np.zeros_like(qd)
         return (self.coulomb + self.stribeck) * (1.0 - np.abs(np.tanh(qd / self.velocity_scale)))
 
+    def still(self, qd: np.ndarray) -> np.ndarray:
+        """Whether every joint with a velocity in qd ((..., n)) is slower than its friction's velocity
+        scale (static friction's regime): (...) bool."""
+        return np.all(~(np.abs(qd) >= self.velocity_scale), axis=-1)
+
 
 def friction_shapes(
     qd: np.ndarray, velocity_scale: np.ndarray | float, stribeck_velocity: np.ndarray | float

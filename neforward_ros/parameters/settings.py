@@ -55,6 +55,8 @@ class NodeSettings:
             the URDF's (``inertial.*``).
         wrench_links: links with ~/<link>/wrench.
         contact_thresholds: joint name -> |external torque| threshold; empty: no ~/contact.
+        contact_rest_thresholds: joint name -> threshold of the departure from the still arm's
+            baseline (:mod:`neforward_ros.computation.contact`); empty: no rest test.
         contact_debounce: s.
         contact_release: in contact, the fraction of their thresholds the joints must stay over.
         contact_static_friction: the fraction of the Coulomb friction added to the thresholds near rest.
@@ -92,6 +94,7 @@ class NodeSettings:
     inertials: tuple[tuple[str, float, tuple[float, ...], tuple[float, ...]], ...] = ()
     wrench_links: tuple[str, ...] = ()
     contact_thresholds: Mapping[str, float] = field(default_factory=dict)
+    contact_rest_thresholds: Mapping[str, float] = field(default_factory=dict)
     contact_debounce: float = 0.02
     contact_release: float = 1.0
     contact_static_friction: float = 1.0
@@ -197,6 +200,9 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
     effort_scale = _per_joint(merged, "effort.joint_names", "effort.scale", default=1.0)
     effort_offset = _per_joint(merged, "effort.joint_names", "effort.offset", default=0.0)
     contact_thresholds = _per_joint(merged, "contact.joint_names", "contact.thresholds")
+    contact_rest_thresholds = {}
+    if merged["contact.rest_thresholds"]:
+        contact_rest_thresholds = _per_joint(merged, "contact.joint_names", "contact.rest_thresholds")
     friction = {
         field_name: _per_joint(merged, "friction.joint_names", f"friction.{field_name}", default=default)
         for field_name, default in (
@@ -227,6 +233,8 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         raise InputError("parameter external_torques.velocity_cutoff must be at least 0 Hz")
     if any(not v > 0.0 for v in contact_thresholds.values()):
         raise InputError("parameter contact.thresholds must hold positive numbers")
+    if any(not v > 0.0 for v in contact_rest_thresholds.values()):
+        raise InputError("parameter contact.rest_thresholds must hold positive numbers")
     if not merged["base.max_delay"] > 0.0:
         raise InputError(
             f"parameter base.max_delay must be a positive number of seconds, got {merged['base.max_delay']}"
@@ -280,6 +288,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         velocity_cutoff=merged["external_torques.velocity_cutoff"],
         wrench_links=tuple(merged["wrench_links"]),
         contact_thresholds=contact_thresholds,
+        contact_rest_thresholds=contact_rest_thresholds,
         contact_debounce=merged["contact.debounce"],
         contact_release=merged["contact.release"],
         contact_static_friction=merged["contact.static_friction"],

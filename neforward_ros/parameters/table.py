@@ -230,6 +230,14 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("contact.joint_names", "string[]", [], "Joints watched for contact: ~/contact (std_msgs/Bool)."),
     Parameter("contact.thresholds", "double[]", [], "|external torque| above which each is in contact, N m (N)."),
     Parameter(
+        "contact.rest_thresholds",
+        "double[]",
+        [],
+        "observer: while the arm is still (every joint slower than its friction.velocity_scale for 0.2 s), the "
+        "departure of each one's external torque from its value at rest above which it is in contact, N m (N); empty: "
+        "contact.thresholds at rest too. neforward calibrate measures them where its recordings hold still.",
+    ),
+    Parameter(
         "contact.debounce", "double", 0.02, "s a change (contact or none) must last before ~/contact follows it."
     ),
     Parameter(
