@@ -93,3 +93,17 @@ def test_rest_departures_are_what_the_rest_test_watches() -> None:
     assert np.isnan(departures[:dwell]).all() and np.allclose(departures[dwell:150], 0.0)
     assert departures[150, 0] == pytest.approx(0.5)
     assert 0.0 < departures[-1, 0] < 0.5  # the baseline follows
+
+
+def test_a_stretch_without_estimates_starts_the_rest_over() -> None:
+    """Still at 5 N m, then 0.5 s without external torques (a restart: the arm may move unseen), then
+    still at 8 N m (stuck with another friction): a new rest with 8 as its baseline, no contact; with
+    the estimates there all along, the same step is a departure of 3 over the rest threshold 1."""
+    t = np.arange(0.0, 4.0, 1.0 / RATE)
+    external = np.where(t < 1.5, 5.0, 8.0)
+    gap = (t >= 1.5) & (t < 2.0)
+    stamps = np.arange(len(t), dtype=np.int64) * round(NS / RATE)
+    still = np.ones(len(t), bool)
+    states = detector().update_many(stamps, np.where(gap, np.nan, external)[:, None], ~gap, None, still)
+    assert not np.nansum(states)
+    assert episodes(*run(detector(), external, still))

@@ -232,8 +232,10 @@ def observe_raw(model: RobotModel, settings: NodeSettings, raw: RawStates, state
     if state.contact is not None:
         slack = settings.contact_static_friction * state.effort.static_friction(filtered)
         if raw.single:
-            known = np.isfinite(external).any()
-            contact = state.contact.update(raw.stamps, external, slack, bool(still)) if known else None
+            if np.isfinite(external).any():
+                contact = state.contact.update(raw.stamps, external, slack, bool(still))
+            else:
+                state.contact.unseen()
         else:
             usable = np.isfinite(external).any(axis=-1)
             contact = state.contact.update_many(raw.stamps, external, usable, slack, still)

@@ -92,6 +92,11 @@ class ContactDetector:
         self._baseline = np.where(np.isfinite(self._baseline), self._baseline, external)
         return external - self._baseline
 
+    def unseen(self) -> None:
+        """A stamp without external torques (a restart, the observer warming up): the arm may have
+        moved unseen, so the rest test starts over."""
+        self._still_since = self._baseline = None
+
     def _follow(self, stamp_ns: int, external: np.ndarray) -> None:
         """The baseline follows the external torques (out of contact, nothing over)."""
         assert self._baseline is not None
@@ -170,9 +175,13 @@ class ContactDetector:
     ) -> np.ndarray:
         """The states at T stamps, in order: (T,) 1.0 or 0.0, NaN where not ``usable`` (a stamp without
         every joint's state) or no watched joint has a measured effort; ``slack`` (T, n) and ``still``
-        (T,) as for :meth:`update`."""
+        (T,) as for :meth:`update` (with ``still``, a stamp not ``usable`` is :meth:`unseen`)."""
         out = np.full(len(stamps), np.nan)
-        for i in np.flatnonzero(usable):
+        for i in range(len(stamps)):
+            if not usable[i]:
+                if still is not None:
+                    self.unseen()
+                continue
             state = self.update(
                 int(stamps[i]),
                 external[i],
