@@ -2,8 +2,9 @@
 
 The ground truth of the contact tests, the contact benchmark and the calibration example. The
 joints follow a prescribed smooth motion (a sum of sines per joint, with optional pauses); the
-motors' torques are what Pinocchio's inverse dynamics (``rnea``) needs for it, plus joint friction,
-minus the torque of the pushes (tau_m = rnea(q, qd, qdd) + tau_f(qd) - J^T F): the arm is held on
+motors' torques are what Pinocchio's inverse dynamics (``rnea``) needs for it, plus joint friction
+and what the motors spend on their own rotors (armature, if given), minus the torque of the pushes
+(tau_m = rnea(q, qd, qdd) + armature qdd + tau_f(qd) - J^T F): the arm is held on
 its path, as a stiff position controller holds it. A driver then reports, at ``rate`` Hz with
 jittered stamps:
 
@@ -55,6 +56,7 @@ class Joints:
     scale: np.ndarray
     stribeck: np.ndarray
     stribeck_velocity: np.ndarray
+    armature: np.ndarray | None = None  # kg m^2: each motor's rotor inertia at the joint; None: none
 
 
 @dataclass
@@ -223,7 +225,8 @@ def simulate(arm: Arm, seconds: float) -> Simulated:
             jacobian = pin.getFrameJacobian(model, data, point, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
             tau_push[k] = jacobian[:3].T @ force[k]
     joints = arm.joints
-    tau_m = tau_motion + friction(joints, qd) - tau_push
+    rotors = 0.0 if joints.armature is None else joints.armature * qdd
+    tau_m = tau_motion + rotors + friction(joints, qd) - tau_push
     step = 2 * np.pi / 2**arm.encoder_bits
     measured_q = np.round(q / step) * step
     measured_qd = qd + rng.normal(0, arm.velocity_noise, qd.shape)

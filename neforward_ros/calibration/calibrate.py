@@ -14,7 +14,8 @@ thresholds out, as a params file the node and the bag tool take as it is.
    that one outlier cannot blind detection; the stretches the thresholds leave above them are
    reported, and the debounce rides over them. A contact ends once every joint is under
    :data:`RELEASE` of its threshold (hysteresis). The contact debounce is at least the observer's
-   time constant, 1 / gain (at least a millisecond): its output is already filtered. Unless given,
+   time constant, 1 / gain (at least a millisecond): its output is already filtered; and at least
+   :data:`DEBOUNCE_SAMPLES` sample intervals. Unless given,
    the observer's velocity cutoff is chosen among :data:`CUTOFFS` on the free motion: the highest
    (the least lag) whose external torques have a mean square within :data:`CUTOFF_SLACK` of the
    least, velocity noise against the lag of the momentum's rate measured on the robot itself.
@@ -54,6 +55,9 @@ from neforward_ros.parameters.settings import node_settings
 
 RELEASE = 0.6
 """The contact's hysteresis: a contact ends once every joint is under this fraction of its threshold."""
+DEBOUNCE_SAMPLES = 3
+"""The contact debounce spans at least this many sample intervals: at a slow rate, what a model error
+leaves for a sample or two (a drive ringing after an abrupt stop) raises no contact."""
 CUTOFFS = (0.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 """Hz: the observer's velocity cutoffs tried (0: no filter)."""
 CUTOFF_SLACK = 2.5
@@ -153,6 +157,7 @@ def calibrate(
             samples.append(raw)
     progress("preparing", 1.0)
     here = _momentum_fit(samples, options, model, measured, held, stribeck, payload, progress)
+    given_scales = set(values.get("effort.joint_names", ())) if values.get("effort.scale") else set()
     identified = None
     if inertia and payload is None and measured.any():
         # The inertial parameters, with the friction's shapes the momentum fit found; then that fit
@@ -164,7 +169,18 @@ def calibrate(
             values = {**values, **identified.values()}
             options = BagOptions.from_parameters(values, urdf=urdf, joint_states_topic=joint_states_topic)
             model = options.settings.model_of(recordings[0].model)
-            here = _momentum_fit(samples, options, model, measured, held, stribeck, payload, progress)
+            # The parameters were identified in the units the given scales set: those scales stay.
+            here = _momentum_fit(
+                samples,
+                options,
+                model,
+                measured,
+                held,
+                stribeck,
+                payload,
+                progress,
+                [j for j, name in enumerate(names) if name in given_scales],
+            )
         progress("inertia", 1.0)
     parts, data, fits, prior = here.parts, here.data, here.fits, here.prior
     stamps, efforts, qd, runs = here.stamps, here.efforts, here.qd, here.runs
@@ -242,12 +258,11 @@ def calibrate(
     outliers = excursions(after, free.stamps, free.recording, thresholds)
     steps = np.diff(free.stamps)[np.diff(free.recording) == 0]
     interval = float(np.median(steps[steps > 0])) / 1e9 if (steps > 0).any() else 0.0
-    debounce = debounce_over(outliers, interval, least)
+    debounce = debounce_over(outliers, interval, max(least, DEBOUNCE_SAMPLES * interval))
     if debounce > 0.0:
         fitted["contact.debounce"] = float(np.ceil(debounce * 1000.0) / 1000.0)
     node_settings(fitted)  # what is written is what the node accepts
     notes = [note for fit in fits for note in fit.notes]
-    given_scales = set(original.get("effort.joint_names", ())) if "effort.scale" in original else set()
     unscaled = [
         name
         for name, fit, ok in zip(names, fits, measured, strict=True)
@@ -352,9 +367,10 @@ def _momentum_fit(
     stribeck: bool,
     payload: str | None,
     progress: Callable[[str, float], None],
+    kept_scales: Sequence[int] = (),
 ) -> _Momentum:
     """Each joint's scale, offset and friction on the momentum equation, with this model, on the
-    recordings' measured ``samples``."""
+    recordings' measured ``samples``; ``kept_scales``: joints whose scale stays the given one."""
     names = model.joint_names
     prior_settings = options.settings
     prior = ComputeState.new(model, prior_settings).effort
@@ -367,6 +383,7 @@ def _momentum_fit(
     if not any(known.any() for *_, known in parts):
         raise InputError("no joint state with every joint's position and effort: nothing to calibrate on")
     stamps, momentum, rest, efforts, qd, runs, offset = [], [], [], [], [], [], 0
+    measured_qd = []
     for raw, p, r, known in parts:
         edges = [0, *np.flatnonzero(raw.restart[1:] | ~known[1:] | ~known[:-1]) + 1, len(raw)]
         runs += [(offset + a, offset + b) for a, b in itertools.pairwise(edges) if known[a]]
@@ -374,16 +391,17 @@ def _momentum_fit(
         momentum.append(p)
         rest.append(r)
         efforts.append(raw.efforts)
+        measured_qd.append(raw.qd)
         qd.append(_smoothed(raw.qd, raw.stamps, [(a - offset, b - offset) for a, b in runs if a >= offset]))
         offset += len(raw)
     progress("fitting", 0.0)
     data = windows(
         np.concatenate(stamps), np.concatenate(momentum), np.concatenate(rest), np.concatenate(efforts),
-        np.concatenate(qd), runs,
+        np.concatenate(qd), runs, momentum_qd=np.concatenate(measured_qd),
     )  # fmt: skip
     # A payload's torques and the effort scales trade off: with --payload the scales are the given ones
     # (a calibration without the payload first, then this one with --params of it).
-    fits = fit_joints(data, names, prior, stribeck=stribeck, scale=payload is None, held=held)
+    fits = fit_joints(data, names, prior, stribeck=stribeck, scale=payload is None, held=held, kept_scales=kept_scales)
     return _Momentum(parts, stamps, efforts, qd, runs, data, fits, prior)
 
 
@@ -528,4 +546,6 @@ def _fitted_parameters(names: Sequence[str], fits: list[JointFit], stribeck: boo
     }
     if stribeck:
         out["friction.stribeck"] = rounded([f.stribeck for f in fits])
+    if any(f.armature > 0.0 for f in fits):
+        out["effort.armature"] = rounded([f.armature for f in fits])
     return out

@@ -63,16 +63,21 @@ def run_calibrate(args: argparse.Namespace) -> int:
         values.update(load_params_file(args.params))
     values.update(command_line_parameters([t for rule in args.param for t in ("-p", rule)])[1])
     if args.effort_scale:
-        scales = dict(zip(values.get("effort.joint_names", ()), values.get("effort.scale", ()), strict=False))
-        offsets = dict(zip(values.get("effort.joint_names", ()), values.get("effort.offset", ()), strict=False))
+        given = values.get("effort.joint_names", ())
+        scales = dict(zip(given, values.get("effort.scale", ()) or [1.0] * len(given), strict=False))
+        others = {  # the params file's other effort.* values, by joint
+            key: dict(zip(given, values[key], strict=False))
+            for key in ("effort.offset", "effort.armature")
+            if values.get(key)
+        }
         for name, (gain,) in joint_numbers(args.effort_scale, "--effort-scale").items():
             if not gain > 0.0:
                 raise InputError(f"--effort-scale takes JOINT=GAIN with a positive gain, got {name}={gain:g}")
             scales[name] = gain
         values["effort.joint_names"] = list(scales)
         values["effort.scale"] = [float(v) for v in scales.values()]
-        if offsets:
-            values["effort.offset"] = [float(offsets.get(name, 0.0)) for name in scales]
+        for key, by_joint in others.items():
+            values[key] = [float(by_joint.get(name, 0.0)) for name in scales]
     found = calibrate(
         [Path(p) for p in args.inputs],
         values,
@@ -109,18 +114,21 @@ def describe(found: Calibration, output: Path) -> str:
 
     rows = [
         f"calibrated on {found.samples} joint states; external torques by the {found.method}",
-        f"{'joint':<24}{'scale':>8}{'offset':>9}{'coulomb':>9}{'viscous':>9}{'v_scale':>9}"
+        f"{'joint':<24}{'scale':>8}{'offset':>9}{'coulomb':>9}{'viscous':>9}{'v_scale':>9}{'armature':>10}"
         f"{'RMS before':>12}{'RMS after':>11}{'threshold':>11}",
     ]
     for k, (name, fit) in enumerate(zip(found.joint_names, found.fits, strict=True)):
+        armature = f"{fit.armature:>10.4g}" if "armature" in fit.fitted or fit.armature else f"{'-':>10}"
         rows.append(
             f"{name:<24}{fit.scale:>8.3f}{fit.offset:>9.3f}{fit.coulomb:>9.3f}{fit.viscous:>9.3f}"
-            f"{fit.velocity_scale:>9.4f}{found.before[k]:>12.3f}{found.after[k]:>11.3f}{found.thresholds[k]:>11.3f}"
+            f"{fit.velocity_scale:>9.4f}{armature}{found.before[k]:>12.3f}{found.after[k]:>11.3f}"
+            f"{found.thresholds[k]:>11.3f}"
         )
     rows.append(
         f"(RMS: the external torque in this free motion, N m (N), with the given parameters and with the fitted "
         f"ones; threshold: {MARGIN:g} x the largest {100 * QUANTILE:g}th percentile of its |external torque| over "
-        "three speed ranges)"
+        "three speed ranges; armature: the rotor's inertia at the joint, kg m^2 (kg), '-' where the motion did not "
+        "tell it)"
     )
     if found.rest_thresholds is not None:
         pairs = zip(found.joint_names, found.rest_thresholds.tolist(), strict=True)

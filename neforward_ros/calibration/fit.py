@@ -2,20 +2,24 @@
 
 With no contact, the generalized momentum p = M(q) qd of the arm changes at the rate
 
-    dp/dt = scale * effort + offset - tau_f(qd) - g(q) + C(q, qd)^T qd
+    dp/dt = scale * effort + offset - tau_f(qd) - armature * qdd - g(q) + C(q, qd)^T qd
 
-(:mod:`neforward_ros.kinematics.joint_space`). Averaged over a window [a, b], with no acceleration
-anywhere:
+(:mod:`neforward_ros.kinematics.joint_space`; armature * qdd the torque the motor spends on its own
+rotor). Averaged over a window [a, b], with no acceleration estimated anywhere (the rotor's term
+averages to the change of velocity over the window):
 
     (p(b) - p(a)) / (b - a) + mean(g - C^T qd) = scale * mean(effort) + offset
                                                  - coulomb * mean(tanh(qd / velocity_scale))
                                                  - viscous * mean(qd) - stribeck * mean(...)
+                                                 - armature * (qd(b) - qd(a)) / (b - a)
 
-which is linear in each joint's scale, offset and friction coefficients, given the velocity scales
-(chosen from a few candidates, the one with the least residual). Every window gives one equation per
-joint, and each joint's coefficients are fitted on its own. A parameter the motion does not excite
-is kept at its prior and said: Coulomb friction on a joint that never reversed, viscous friction on
-a joint that moved at one speed, the scale where its uncertainty is large.
+which is linear in each joint's scale, offset, friction coefficients and armature, given the
+velocity scales (chosen from a few candidates, the one with the least residual). Every window gives
+one equation per joint, and each joint's coefficients are fitted on its own. A parameter the motion
+does not excite is kept at its prior and said: Coulomb friction on a joint that never reversed,
+viscous friction on a joint that moved at one speed, the scale where its uncertainty is large. The
+armature is fitted last, where the data tell it (:data:`ARMATURE_UNCERTAINTY`); elsewhere it keeps
+its prior (0 unless given) silently, as a rotor too light to matter would.
 """
 
 from __future__ import annotations
@@ -45,6 +49,10 @@ SPEED_RANGE = 0.05
 """rad/s (m/s): the least spread of the windows' mean speeds for viscous friction."""
 SCALE_UNCERTAINTY = 0.05
 """The largest relative standard error of a fitted effort scale; above it the scale is kept."""
+ARMATURE_UNCERTAINTY = 0.2
+"""The largest relative standard error of a fitted armature; above it the armature is kept."""
+FRICTION = ("coulomb", "viscous", "stribeck")
+"""The coefficients that cannot be negative, besides the armature."""
 
 
 @dataclass
@@ -74,6 +82,8 @@ class Windows:
         effort: mean(effort).
         velocity: mean(qd).
         speeds: (T, n) the samples' velocities (for the checks of excitation).
+        acceleration: (qd(b) - qd(a)) / (b - a), of the velocities the momentum was taken at.
+        instrument: the same, each end's velocity the mean of its neighbours' (:func:`_neighbours`).
     """
 
     target: np.ndarray
@@ -82,6 +92,20 @@ class Windows:
     speeds: np.ndarray
     runs: list[_Run]
     stribeck_velocity: float
+    acceleration: np.ndarray
+    instrument: np.ndarray
+
+    def terms(self, j: int, velocity_scale: float) -> dict[str, tuple[np.ndarray, float]]:
+        """Joint j's columns of the equation by coefficient, with their signs (the offset's aside):
+        scale * effort - coulomb * sign - viscous * velocity - stribeck * decay - armature * acceleration."""
+        sign, decay = self.shapes(j, velocity_scale)
+        return {
+            "scale": (self.effort[:, j], 1.0),
+            "coulomb": (sign, -1.0),
+            "viscous": (self.velocity[:, j], -1.0),
+            "stribeck": (decay, -1.0),
+            "armature": (self.acceleration[:, j], -1.0),
+        }
 
     def shapes(self, j: int, velocity_scale: float) -> tuple[np.ndarray, np.ndarray]:
         """Joint j's window means of tanh(qd / velocity_scale) and of the Stribeck shape times it."""
@@ -102,6 +126,7 @@ def windows(
     runs: Sequence[tuple[int, int]],
     window: float = WINDOW,
     stribeck_velocity: float = DEFAULT_STRIBECK_VELOCITY,
+    momentum_qd: np.ndarray | None = None,
 ) -> Windows:
     """The windows of contiguous runs of samples ([start, stop) index pairs, no restart inside).
 
@@ -109,9 +134,13 @@ def windows(
         stamps_ns: (T,) int ns.
         momentum: (T, n) p.
         rest: (T, n) g - C^T qd.
-        efforts, qd: (T, n) measured efforts and velocities.
+        efforts, qd: (T, n) measured efforts and velocities (for friction's shapes).
+        momentum_qd: (T, n) the velocities the momentum was taken at (for the rotors' term); None: qd.
     """
-    parts: dict[str, list[np.ndarray]] = {"target": [], "effort": [], "velocity": []}
+    momentum_qd = qd if momentum_qd is None else momentum_qd
+    parts: dict[str, list[np.ndarray]] = {
+        "target": [], "effort": [], "velocity": [], "acceleration": [], "instrument": []
+    }  # fmt: skip
     kept: list[_Run] = []
     for start, stop in runs:
         t = (stamps_ns[start:stop] - stamps_ns[start]) / 1e9
@@ -128,6 +157,10 @@ def windows(
         parts["target"].append((p[run.b] - p[run.a]) / span + run.mean(rest[start:stop]))
         parts["effort"].append(run.mean(efforts[start:stop]))
         parts["velocity"].append(run.mean(run.qd))
+        v = momentum_qd[start:stop]
+        parts["acceleration"].append((v[run.b] - v[run.a]) / span)
+        around = _neighbours(v)
+        parts["instrument"].append((around[run.b] - around[run.a]) / span)
     if not parts["target"]:
         raise ValueError("no window: the recordings are too short")
     return Windows(
@@ -137,7 +170,18 @@ def windows(
         qd,
         kept,
         stribeck_velocity,
+        np.concatenate(parts["acceleration"]),
+        np.concatenate(parts["instrument"]),
     )
+
+
+def _neighbours(v: np.ndarray) -> np.ndarray:
+    """Each sample's velocities as the mean of its two neighbours on each side (one side at a run's
+    ends), without the sample itself: free of its own noise, which the momentum at that sample carries."""
+    padded = np.concatenate([np.full((2, v.shape[1]), np.nan), v, np.full((2, v.shape[1]), np.nan)])
+    around = np.stack([padded[k : k + len(v)] for k in (0, 1, 3, 4)])
+    known = np.isfinite(around)
+    return np.where(known, around, 0.0).sum(axis=0) / np.maximum(known.sum(axis=0), 1)
 
 
 @dataclass
@@ -150,10 +194,12 @@ class JointFit:
     viscous: float = 0.0
     velocity_scale: float = 0.01
     stribeck: float = 0.0
+    armature: float = 0.0
     residual_before: float = float("nan")
     residual_after: float = float("nan")
     notes: list[str] = field(default_factory=list)
-    fitted: tuple[str, ...] = ()  # which of scale, coulomb, viscous, stribeck were fitted (the offset always is)
+    # which of scale, coulomb, viscous, stribeck, armature were fitted (the offset always is)
+    fitted: tuple[str, ...] = ()
 
 
 def fit_joints(
@@ -163,10 +209,12 @@ def fit_joints(
     stribeck: bool = False,
     scale: bool = True,
     held: Sequence[int] = (),
+    kept_scales: Sequence[int] = (),
 ) -> list[JointFit]:
     """Each joint's parameters (see the module docstring); ``prior``: the values kept where the motion
-    does not tell (and the residual before); ``scale`` False keeps every scale at the prior's; ``held``:
-    joints never in the recordings (no effort measured), which keep the prior's values."""
+    does not tell (and the residual before); ``scale`` False keeps every scale at the prior's, and
+    ``kept_scales`` those of these joints; ``held``: joints never in the recordings (no effort
+    measured), which keep the prior's values."""
     fits = []
     for j, name in enumerate(names):
         if j in held:
@@ -177,25 +225,26 @@ def fit_joints(
                 viscous=float(prior.viscous[j]),
                 velocity_scale=float(prior.velocity_scale[j]),
                 stribeck=float(prior.stribeck[j]),
+                armature=float(prior.armature[j]),
             )
             kept.notes.append(f"joint {name} is in none of the recordings (held at rest): nothing of it was fitted")
             fits.append(kept)
             continue
-        fits.append(_fit_joint(data, j, name, prior, stribeck, scale))
+        fits.append(_fit_joint(data, j, name, prior, stribeck, scale and j not in kept_scales))
     return fits
 
 
 def _fit_joint(data: Windows, j: int, name: str, prior: EffortModel, stribeck: bool, scale: bool) -> JointFit:
     y = data.target[:, j]
-    effort = data.effort[:, j]
     velocity = data.velocity[:, j]
-    speeds = data.speeds[:, j]
     fit = JointFit()
-    sign_prior, _ = data.shapes(j, float(prior.velocity_scale[j]))
-    before = prior.scale[j] * effort + prior.offset[j] - prior.coulomb[j] * sign_prior - prior.viscous[j] * velocity
+    before = prior.offset[j] + sum(
+        sign_of * float(getattr(prior, key)[j]) * column
+        for key, (column, sign_of) in data.terms(j, float(prior.velocity_scale[j])).items()
+    )
     fit.residual_before = float(np.sqrt(np.mean(np.square(y - before))))
-    free = {"scale": scale, "coulomb": True, "viscous": True, "stribeck": stribeck}
-    del speeds  # the windows' means, not the noisy samples, tell whether a joint moved
+    free = {"scale": scale, "coulomb": True, "viscous": True, "stribeck": stribeck, "armature": False}
+    # the windows' means, not the noisy samples, tell whether a joint moved
     threshold = REVERSAL_SPEED
     forwards, backwards = float(np.mean(velocity > threshold)), float(np.mean(velocity < -threshold))
     if min(forwards, backwards) < REVERSALS:
@@ -212,9 +261,10 @@ def _fit_joint(data: Windows, j: int, name: str, prior: EffortModel, stribeck: b
             f"viscous friction is kept at {prior.viscous[j]:g} (move it at several speeds)"
         )
 
-    def attempt(velocity_scale: float) -> tuple[float, dict[str, float]] | None:
-        sign, decay = data.shapes(j, velocity_scale)
-        return _solve(y, effort, velocity, sign, decay, free, prior, j)
+    instruments = {"armature": data.instrument[:, j]}
+
+    def attempt(velocity_scale: float, free=free, prior=prior) -> tuple[float, dict[str, float]] | None:
+        return _solve(y, data.terms(j, velocity_scale), free, prior, j, instruments)
 
     def best_fit() -> tuple[float, float, dict[str, float]] | None:
         found = _best_scale(attempt) if free["coulomb"] else None
@@ -248,6 +298,7 @@ def _fit_joint(data: Windows, j: int, name: str, prior: EffortModel, stribeck: b
         fit.notes.append(f"joint {name}: nothing could be fitted; the prior is kept")
         fit.scale, fit.offset = float(prior.scale[j]), float(prior.offset[j])
         fit.coulomb, fit.viscous = float(prior.coulomb[j]), float(prior.viscous[j])
+        fit.armature = float(prior.armature[j])
         fit.residual_after = fit.residual_before
         return fit
     residual, velocity_scale, values = best
@@ -260,9 +311,26 @@ def _fit_joint(data: Windows, j: int, name: str, prior: EffortModel, stribeck: b
         solved = attempt(velocity_scale)
         assert solved is not None
         residual, values = solved
-    fit.fitted = tuple(k for k in ("scale", "coulomb", "viscous", "stribeck") if free[k])
+    # The armature last: with the scale as free as it was, else at the value just found (a joint whose
+    # torque is mostly its own inertia cannot tell the two apart: the scale found without a rotor stands).
+    trials = [(dict(free, armature=True), prior)]
+    if free["scale"]:
+        trials.append((dict(free, armature=True, scale=False), _with(prior, "scale", j, values["scale"])))
+    for trial_free, trial_prior in trials:
+        solved = attempt(velocity_scale, trial_free, trial_prior)
+        if solved is None or "armature_error" not in solved[1]:
+            continue
+        found = solved[1]
+        told = found["armature_error"] <= ARMATURE_UNCERTAINTY * found["armature"]
+        if trial_free["scale"]:
+            told = told and found["scale_error"] <= SCALE_UNCERTAINTY * abs(found["scale"])
+        if told:
+            residual, values, free = solved[0], found, trial_free
+            break
+    fit.fitted = tuple(k for k in ("scale", "coulomb", "viscous", "stribeck", "armature") if free[k])
     fit.scale, fit.offset = values["scale"], values["offset"]
     fit.coulomb, fit.viscous, fit.stribeck = values["coulomb"], values["viscous"], values["stribeck"]
+    fit.armature = values["armature"]
     fit.velocity_scale = velocity_scale
     fit.residual_after = residual
     return fit
@@ -296,31 +364,40 @@ def _best_scale(attempt) -> tuple[float, float, dict[str, float]] | None:
     return best
 
 
-def _solve(y, effort, velocity, sign, stribeck, free, prior: EffortModel, j: int):
-    """Least squares of one joint with the free parameters; the fixed ones at the prior. Friction
-    coefficients that come out negative are fixed at 0 and the rest fitted again."""
+def _solve(
+    y: np.ndarray,
+    terms: dict[str, tuple[np.ndarray, float]],
+    free: dict[str, bool],
+    prior: EffortModel,
+    j: int,
+    instruments: dict[str, np.ndarray] | None = None,
+) -> tuple[float, dict[str, float]] | None:
+    """Least squares of one joint with the free coefficients (``terms``: :meth:`Windows.terms`); the
+    fixed ones at the prior. Friction coefficients or an armature that come out negative are fixed at
+    0 and the rest fitted again. The values, and each free coefficient's standard error as
+    ``<name>_error``.
+
+    ``instruments``: a column whose noise is in the target too (the velocities' change, which the
+    momentum's change carries M times over) is fitted by instrumental variables, with this stand-in
+    free of that noise: plain least squares would pull its coefficient towards -M."""
+    instruments = instruments or {}
     free = dict(free)
-    for _ in range(4):
+    for _ in range(len(terms) + 1):
         columns = {"offset": np.ones_like(y)}
         fixed = np.zeros_like(y)
-        for key, column, sign_of in (
-            ("scale", effort, 1.0),
-            ("coulomb", sign, -1.0),
-            ("viscous", velocity, -1.0),
-            ("stribeck", stribeck, -1.0),
-        ):
+        for key, (column, sign_of) in terms.items():
             if free[key]:
                 columns[key] = sign_of * column
             else:
-                value = {"scale": prior.scale[j], "coulomb": prior.coulomb[j], "viscous": prior.viscous[j],
-                         "stribeck": prior.stribeck[j]}[key]  # fmt: skip
-                fixed += sign_of * value * column
+                fixed += sign_of * float(getattr(prior, key)[j]) * column
         names = list(columns)
         matrix = np.stack([columns[k] for k in names], axis=1)
         target = y - fixed
-        solution, *_ = np.linalg.lstsq(matrix, target, rcond=None)
+        stand_in = np.stack([terms[k][1] * instruments[k] if k in instruments else columns[k] for k in names], axis=1)
+        normal = stand_in.T @ matrix
+        solution, *_ = np.linalg.lstsq(normal, stand_in.T @ target, rcond=None)
         values = dict(zip(names, solution.tolist(), strict=True))
-        negative = [k for k in ("coulomb", "viscous", "stribeck") if k in values and values[k] < 0]
+        negative = [k for k in (*FRICTION, "armature") if k in values and values[k] < 0]
         if negative:
             for k in negative:
                 free[k] = False
@@ -331,21 +408,19 @@ def _solve(y, effort, velocity, sign, stribeck, free, prior: EffortModel, j: int
             continue
         residual_vector = target - matrix @ solution
         residual = float(np.sqrt(np.mean(np.square(residual_vector))))
-        out = {
-            "scale": float(values.get("scale", prior.scale[j])),
-            "offset": float(values["offset"]),
-            "coulomb": float(values.get("coulomb", prior.coulomb[j])),
-            "viscous": float(values.get("viscous", prior.viscous[j])),
-            "stribeck": float(values.get("stribeck", prior.stribeck[j])),
-        }
-        if "scale" in values:
-            dof = max(len(y) - len(names), 1)
-            variance = float(residual_vector @ residual_vector) / dof
-            try:
-                covariance = variance * np.linalg.inv(matrix.T @ matrix)
-                out["scale_error"] = float(np.sqrt(covariance[names.index("scale"), names.index("scale")]))
-            except np.linalg.LinAlgError:
-                out["scale_error"] = float("inf")
+        out = {key: float(values.get(key, getattr(prior, key)[j])) for key in terms}
+        out["offset"] = float(values["offset"])
+        dof = max(len(y) - len(names), 1)
+        variance = float(residual_vector @ residual_vector) / dof
+        try:
+            inverse = np.linalg.inv(normal)
+            covariance = variance * inverse @ (stand_in.T @ stand_in) @ inverse.T
+            errors = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+        except np.linalg.LinAlgError:
+            errors = np.full(len(names), np.inf)
+        for key in ("scale", "armature"):
+            if key in values:
+                out[f"{key}_error"] = float(errors[names.index(key)])
         return residual, out
     return None
 

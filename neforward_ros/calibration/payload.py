@@ -85,15 +85,9 @@ def fit_payload(
     n = len(fits)
     blocks, targets = [], []
     for j, fit in enumerate(fits):
-        sign, decay = data.shapes(j, fit.velocity_scale)
         columns = [np.ones(len(data.target))]
         target = data.target[:, j].copy()
-        for key, column, factor in (
-            ("scale", data.effort[:, j], 1.0),
-            ("coulomb", sign, -1.0),
-            ("viscous", data.velocity[:, j], -1.0),
-            ("stribeck", decay, -1.0),
-        ):
+        for key, (column, factor) in data.terms(j, fit.velocity_scale).items():
             if key in fit.fitted:
                 columns.append(factor * column)
             else:

@@ -94,6 +94,7 @@ class ComputeState:
             friction.get("velocity_scale"),
             friction.get("stribeck"),
             friction.get("stribeck_velocity"),
+            settings.effort_armature,
         )
         observer, method = None, "difference"
         if observer_wanted(settings):
@@ -209,7 +210,8 @@ def compute(
         if state.method == "observer":
             external = np.full_like(torques, np.nan)  # the observer's, at the newest samples
         else:
-            external = state.effort.motor(efforts) - (torques + state.effort.friction(qd))
+            model_torque = torques + state.effort.friction(qd) + state.effort.rotor_torque(qdd)
+            external = state.effort.motor(efforts) - model_torque
         dynamics = Dynamics(model.joint_names, q, qd, torques, external, force, moment)
         contact = None
         if state.contact is not None and state.method != "observer":

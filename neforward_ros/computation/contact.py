@@ -7,9 +7,11 @@ measured velocity cannot sign, so that much is added to its threshold (in propor
 1 - |tanh(v / velocity_scale)|, v the filtered velocity). In contact, a joint stays over while
 |external torque| exceeds ``release`` times its threshold (hysteresis: a push whose torques wane on
 one joint and grow on another, or pass through the friction band, is one contact, not several).
-``~/contact`` turns true when some watched joint has been over its threshold for ``debounce``
-seconds, and false again when none has been for ``debounce`` seconds: a spike shorter than that
-(noise, a stick-slip) changes nothing. The detector is the computation's state that runs on from
+``~/contact`` turns true when some watched joint has been over its threshold *the same way* (one
+sign) for ``debounce`` seconds, and false again when none has been over for ``debounce`` seconds: a
+spike shorter than that (noise, a stick-slip) changes nothing, nor does a torque swinging from one
+side to the other (a contact presses one way; a drive ringing after an abrupt stop, which the
+rigid model cannot follow, swings both). The detector is the computation's state that runs on from
 one stamp to the next (the node holds one for its run, the bag tool one per recording), fed in
 stamp order.
 
@@ -69,7 +71,9 @@ class ContactDetector:
         self.debounce_ns = round(debounce * NS)
         self.joint_names = joint_names
         self.state = False
-        self._since: int | None = None  # stamp from which the other state has held
+        self._since: int | None = None  # in contact: stamp from which no joint has been over
+        self._sign = np.zeros(len(self.thresholds))  # out of contact: each joint's side of its threshold
+        self._over_since = np.zeros(len(self.thresholds), dtype=np.int64)  # from which stamp it has held
         self._log = log
         rest = None if rest_thresholds is None else np.asarray(rest_thresholds, dtype=float)
         self.rest_thresholds = rest if rest is not None and np.isfinite(rest[self.watched]).all() else None
@@ -147,22 +151,33 @@ class ContactDetector:
                 thresholds = self.release * self.thresholds
             else:
                 thresholds = self.thresholds if slack is None else self.thresholds + slack
-        over = measured & (np.abs(np.where(measured, values, 0.0)) > np.where(measured, thresholds, 0.0))
+        signed = np.where(measured, values, 0.0)
+        over = measured & (np.abs(signed) > np.where(measured, thresholds, 0.0))
         now = bool(over.any())
         if departure is not None and not now and not self.state:
             self._follow(stamp_ns, external)
         self._stamp = stamp_ns
-        if now == self.state:
+        if self.state:
+            if now:
+                self._since = None
+            elif self._since is None:
+                self._since = stamp_ns
+            change = self._since is not None and stamp_ns - self._since >= self.debounce_ns
+        else:
+            sign = np.where(over, np.sign(signed), 0.0)
+            self._over_since = np.where(sign != self._sign, stamp_ns, self._over_since)
+            self._sign = sign
+            change = bool(np.any(over & (stamp_ns - self._over_since >= self.debounce_ns)))
+        if change:
+            self.state = not self.state
             self._since = None
-        elif self._since is None:
-            self._since = stamp_ns
-        if now != self.state and stamp_ns - self._since >= self.debounce_ns:
-            self.state = now
-            self._since = None
-            if not now:
+            self._sign = np.zeros_like(self._sign)
+            if not self.state:
                 self._still_since = self._baseline = None  # a released arm settles anew: a new rest
             joints = ", ".join(n for n, o in zip(self.joint_names, over, strict=True) if o)
-            self._log.log(logging.INFO, f"contact: {'joint(s) ' + joints + ' over threshold' if now else 'none'}")
+            self._log.log(
+                logging.INFO, f"contact: {'joint(s) ' + joints + ' over threshold' if self.state else 'none'}"
+            )
         return self.state
 
     def update_many(

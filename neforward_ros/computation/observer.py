@@ -1,11 +1,12 @@
 """External torques at the newest sample: a generalized-momentum observer (De Luca and Mattone 2005;
 Haddadin, De Luca and Albu-Schaeffer, IEEE T-RO 2017).
 
-The generalized momentum p = M(q) qd changes at the rate
+The generalized momentum p = (M(q) + diag(armature)) qd changes at the rate
 
     dp/dt = tau_m - tau_f - g(q) + C(q, qd)^T qd - tau_x
 
-with tau_m the motors' torques (``effort.*``), tau_f friction (``friction.*``) and tau_x the external
+with tau_m the motors' torques (``effort.*``), tau_f friction (``friction.*``), armature the rotors'
+inertias (``effort.armature``; constant, so they add nothing to C) and tau_x the external
 torque in this project's sign: measured - model, positive where the motors give more than the motion
 needs (Jᵀw, w the wrench the robot exerts on what it touches). So tau_x needs q, qd and efforts, and
 no joint acceleration: the observer follows it through a first-order filter of gain K per joint,
@@ -135,6 +136,7 @@ def observe(
     values = momentum_values(model, q, filtered, state.gravity_force)
     n = q.shape[1]
     momentum, coriolis, gravity = values[:, :n], values[:, n : 2 * n], values[:, 2 * n :]
+    momentum = momentum + effort.rotor_momentum(filtered)
     rate = effort.motor(efforts) - effort.friction(qd) - gravity + coriolis
     out = np.full((len(stamps), n), np.nan)
     gains = state.gains

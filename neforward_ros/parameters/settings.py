@@ -44,6 +44,7 @@ class NodeSettings:
         publish_torques: whether ~/joint_torques and ~/external_torques are published.
         publish_joint_estimates: whether ~/joint_estimates is published.
         effort_scale, effort_offset: joint name -> measured = scale * effort + offset (others 1, 0).
+        effort_armature: joint name -> its rotor's inertia at the joint, kg m^2 (kg) (others 0).
         friction: ``friction.*`` by field (coulomb, viscous, velocity_scale, stribeck,
             stribeck_velocity) -> joint name -> value (see
             :class:`neforward_ros.kinematics.effort_model.EffortModel`).
@@ -85,6 +86,7 @@ class NodeSettings:
     publish_joint_estimates: bool = False
     effort_scale: Mapping[str, float] = field(default_factory=dict)
     effort_offset: Mapping[str, float] = field(default_factory=dict)
+    effort_armature: Mapping[str, float] = field(default_factory=dict)
     friction: Mapping[str, Mapping[str, float]] = field(default_factory=dict)
     external_method: str = "auto"
     observer_gain: float = DEFAULT_OBSERVER_GAIN
@@ -199,6 +201,9 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
     hold_positions = _per_joint(merged, "hold.joint_names", "hold.positions")
     effort_scale = _per_joint(merged, "effort.joint_names", "effort.scale", default=1.0)
     effort_offset = _per_joint(merged, "effort.joint_names", "effort.offset", default=0.0)
+    effort_armature = _per_joint(merged, "effort.joint_names", "effort.armature", default=0.0)
+    if any(not v >= 0.0 for v in effort_armature.values()):
+        raise InputError("parameter effort.armature must hold numbers >= 0 (kg m^2; kg)")
     contact_thresholds = _per_joint(merged, "contact.joint_names", "contact.thresholds")
     contact_rest_thresholds = {}
     if merged["contact.rest_thresholds"]:
@@ -279,6 +284,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         publish_joint_estimates=merged["publish_joint_estimates"],
         effort_scale=effort_scale,
         effort_offset=effort_offset,
+        effort_armature=effort_armature,
         friction=friction,
         payload=payload,
         inertials=inertials,

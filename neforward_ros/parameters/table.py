@@ -159,6 +159,13 @@ PARAMETERS: tuple[Parameter, ...] = (
     Parameter("effort.scale", "double[]", [], "Their scales (measured = scale * effort + offset), in that order."),
     Parameter("effort.offset", "double[]", [], "Their offsets, N m (N), in that order."),
     Parameter(
+        "effort.armature",
+        "double[]",
+        [],
+        "Their rotors' inertias at the joint (armature: rotor inertia x gear ratio^2), kg m^2 (kg), in that "
+        "order; empty: 0. The motor torque behind external torques adds armature x joint acceleration.",
+    ),
+    Parameter(
         "friction.joint_names",
         "string[]",
         [],
