@@ -500,3 +500,15 @@ def test_given_scales_stay_when_the_inertias_are_identified(recordings) -> None:
     found = calibrate([recordings["folder"] / "free"], {"effort.joint_names": names, "effort.scale": given})
     assert found.identified is not None and found.identified.links, found.notes
     assert found.parameters["effort.scale"] == pytest.approx(given, rel=1e-5)
+
+
+def test_a_given_armature_of_some_joints_leaves_a_valid_params_file(recordings) -> None:
+    """A prior naming one joint's scale and armature: the file written names every joint's effort.*
+    (the fitted armature, or none where no rotor is found), which the node takes as it is."""
+    from neforward_ros.calibration.calibrate import calibrate
+
+    prior = {"effort.joint_names": ["joint1"], "effort.scale": [1.0], "effort.armature": [0.0]}
+    found = calibrate([recordings["folder"] / "free"], prior, inertia=False)
+    node_settings(found.parameters)
+    armature = found.parameters.get("effort.armature")
+    assert armature is None or len(armature) == len(found.parameters["effort.joint_names"]) == 7

@@ -209,6 +209,7 @@ def calibrate(
         progress("payload", 1.0)
     progress("fitting", 1.0)
     fitted = dict(values)
+    fitted.pop("effort.armature", None)  # the fit's (where any rotor is found) replace the given ones
     fitted.update(_fitted_parameters(names, fits, stribeck))
     if found_payload is not None:
         fitted["payload.link"] = found_payload.link
