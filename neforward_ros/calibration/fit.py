@@ -81,7 +81,6 @@ class Windows:
         target: (p(b) - p(a)) / (b - a) + mean(g - C^T qd).
         effort: mean(effort).
         velocity: mean(qd).
-        speeds: (T, n) the samples' velocities (for the checks of excitation).
         acceleration: (qd(b) - qd(a)) / (b - a), of the velocities the momentum was taken at.
         instrument: the same, each end's velocity the mean of its neighbours' (:func:`_neighbours`).
     """
@@ -89,7 +88,6 @@ class Windows:
     target: np.ndarray
     effort: np.ndarray
     velocity: np.ndarray
-    speeds: np.ndarray
     runs: list[_Run]
     stribeck_velocity: float
     acceleration: np.ndarray
@@ -167,7 +165,6 @@ def windows(
         np.concatenate(parts["target"]),
         np.concatenate(parts["effort"]),
         np.concatenate(parts["velocity"]),
-        qd,
         kept,
         stribeck_velocity,
         np.concatenate(parts["acceleration"]),
@@ -395,7 +392,10 @@ def _solve(
         target = y - fixed
         stand_in = np.stack([terms[k][1] * instruments[k] if k in instruments else columns[k] for k in names], axis=1)
         normal = stand_in.T @ matrix
-        solution, *_ = np.linalg.lstsq(normal, stand_in.T @ target, rcond=None)
+        if any(k in instruments for k in names):
+            solution, *_ = np.linalg.lstsq(normal, stand_in.T @ target, rcond=None)
+        else:  # plain least squares, on the columns themselves (not their squared condition number)
+            solution, *_ = np.linalg.lstsq(matrix, target, rcond=None)
         values = dict(zip(names, solution.tolist(), strict=True))
         negative = [k for k in (*FRICTION, "armature") if k in values and values[k] < 0]
         if negative:
