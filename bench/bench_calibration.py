@@ -84,6 +84,17 @@ def series(path: Path, topic_end: str) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(stamps, dtype=np.int64), np.asarray(values)
 
 
+def external_relative(recording: Path, output: Path) -> tuple[np.ndarray, int]:
+    """Per arm joint (the first 7), the RMS of ``output``'s external torques relative to the RMS of the
+    measured torques of ``recording`` at the same stamps; and how many samples had them."""
+    measured_t, measured = series(recording, "/joint_states")
+    out_t, external = series(output, "external_torques")
+    at = np.searchsorted(measured_t, out_t)
+    ok = np.isfinite(external[:, :7]).all(axis=1)
+    relative = np.sqrt(np.mean(external[ok, :7] ** 2, axis=0)) / np.sqrt(np.mean(measured[at[ok], :7] ** 2, axis=0))
+    return relative, int(ok.sum())
+
+
 def contacts(report: str) -> list[str]:
     return [line for line in report.splitlines() if line.startswith("contact: ")]
 
@@ -96,13 +107,9 @@ def panda(realdata: Path, folder: Path) -> None:
         "bag", str(folder / "last40"), "--urdf", str(urdf), "--params", str(folder / "panda.yaml"), "-o",
         str(folder / "panda_out"),
     )  # fmt: skip
-    measured_t, measured = series(folder / "last40", "/joint_states")
-    out_t, external = series(folder / "panda_out", "external_torques")
-    at = np.searchsorted(measured_t, out_t)
-    ok = np.isfinite(external[:, :7]).all(axis=1)
-    relative = np.sqrt(np.mean(external[ok, :7] ** 2, axis=0)) / np.sqrt(np.mean(measured[at[ok], :7] ** 2, axis=0))
+    relative, written = external_relative(folder / "last40", folder / "panda_out")
     print(f"Panda: calibrate on the first 60 %, bag --params on the last 40 % ({count} messages); "
-          f"{ok.sum()} samples with external torques")  # fmt: skip
+          f"{written} samples with external torques")  # fmt: skip
     print("joint            " + " ".join(f"{k:>7}" for k in range(1, 8)))
     print("external/measured" + " ".join(f"{x:7.3f}" for x in relative))
     print("Gaz et al.       " + " ".join(f"{x:7.3f}" for x in GAZ))

@@ -21,15 +21,17 @@ Usage: python bench/bench_panda_noise.py [--realdata ../shared/realdata] [--keep
 from __future__ import annotations
 
 import argparse
+import copy
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from bench_calibration import GAZ, neforward, panda_urdf, series, split
+from bench_calibration import GAZ, external_relative, neforward, panda_urdf, split
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from scipy.signal import butter, filtfilt, lfilter
 
+from neforward_ros.stamps import split_stamp, stamp_ns
 from neforward_ros.wire.rostypes import typestore
 
 RATE = 1000.0
@@ -53,10 +55,6 @@ def write(path: Path, connection, rows: list[tuple[int, object]]) -> None:
             writer.write(out, t, store.serialize_cdr(message, connection.msgtype))
 
 
-def stamp(message) -> int:
-    return message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
-
-
 def filtered(fields: tuple[str, ...], cutoff: float, causal: bool) -> Callable[[list], list]:
     def change(rows: list) -> list:
         b, a = butter(2, cutoff / (RATE / 2.0), "low")
@@ -72,7 +70,7 @@ def filtered(fields: tuple[str, ...], cutoff: float, causal: bool) -> Callable[[
 
 def intervals(rows: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per consecutive pair: the stamps' interval, the data's, and whether the arm moved enough."""
-    t = np.array([stamp(m) for _, m in rows]) / 1e9
+    t = np.array([stamp_ns(m.header.stamp) for _, m in rows]) / 1e9
     q = np.array([m.position for _, m in rows])
     v = np.array([m.velocity for _, m in rows])
     dq, mean_v = np.diff(q, axis=0), 0.5 * (v[1:] + v[:-1])
@@ -84,24 +82,16 @@ def intervals(rows: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def retimed(rows: list) -> list:
     stamps, data, moving = intervals(rows)
     period = 1.0 / RATE
-    out, now = [rows[0]], stamp(rows[0][1])
+    out, now = [rows[0]], stamp_ns(rows[0][1].header.stamp)
     for k in range(1, len(rows)):
         if np.array_equal(rows[k][1].position, rows[k - 1][1].position):
             continue  # a repeat: the same sample again
         step = max(1, round(data[k - 1] / period)) * period if moving[k - 1] else stamps[k - 1]
         now += round(step * 1e9)
         message = rows[k][1]
-        message.header.stamp.sec, message.header.stamp.nanosec = divmod(now, 10**9)
+        message.header.stamp.sec, message.header.stamp.nanosec = split_stamp(now)
         out.append((now, message))
     return out
-
-
-def relative(recording: Path, output: Path) -> np.ndarray:
-    measured_t, measured = series(recording, "/joint_states")
-    out_t, external = series(output, "external_torques")
-    at = np.searchsorted(measured_t, out_t)
-    ok = np.isfinite(external[:, :7]).all(axis=1)
-    return np.sqrt(np.mean(external[ok, :7] ** 2, axis=0)) / np.sqrt(np.mean(measured[at[ok], :7] ** 2, axis=0))
 
 
 def main() -> None:
@@ -140,12 +130,12 @@ def main() -> None:
             if change is not None:
                 recording = folder / f"variant{k}"
                 if not recording.exists():
-                    write(recording, connection, change(messages(folder / "last40")[1]))
+                    write(recording, connection, change(copy.deepcopy(rows)))
             output = folder / f"out{k}"
             if not output.exists():
                 neforward("bag", str(recording), "--urdf", str(urdf), "--params", str(params), "-o", str(output),
                           *extra)  # fmt: skip
-            found = relative(recording, output)
+            found, _ = external_relative(recording, output)
             worst = max(x / g for x, g in zip(found, GAZ, strict=True))
             print(f"{label:30}" + " ".join(f"{x:6.3f}" for x in found) + f"   {worst:.2f}")
         print(f"{'Gaz et al.':30}" + " ".join(f"{x:6.3f}" for x in GAZ))
