@@ -27,10 +27,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from neforward_ros.estimation.motion import MotionModel, MotionModels
-from neforward_ros.stamps import NS
+from neforward_ros.estimation.motion import MotionModel, MotionModels, interval
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
+try:  # numpy's batched inversion itself: np.linalg.inv's checks cost 40 % more per step at this size
+    from numpy.linalg import _umath_linalg
+
+    def _inverse(matrices: np.ndarray) -> np.ndarray:
+        return _umath_linalg.inv(matrices, signature="d->d")
+
+    _inverse(np.eye(2)[None])
+except (ImportError, AttributeError, TypeError):  # pragma: no cover - a numpy without it
+    _inverse = np.linalg.inv
 UNROLLED = 1024
 """The most steps whose smoothed read-out is kept unrolled (a 20 ms lag at 1 kHz needs 21)."""
 
@@ -80,12 +88,13 @@ class KalmanTrack:
             covariance = models.prior.copy()
         else:
             last = self.steps[-1]
-            transition, noise = models.transition((stamp - last.stamp) / NS)
+            transition, noise, transposed = models.transition(interval(stamp, last.stamp))
             state = transition @ last.filtered
-            covariance = transition @ last.covariance @ transition.transpose(0, 2, 1) + noise
+            carried = last.covariance @ transposed  # P_f F^T
+            covariance = transition @ carried + noise
             if self.smooth:
                 # G = P_f F^T P_pred^-1 (an explicit inverse: numpy's batched solve costs more at this size)
-                gain = (last.covariance @ transition.transpose(0, 2, 1)) @ np.linalg.inv(covariance)
+                gain = carried @ _inverse(covariance)
                 last.gain, last.offset = gain, last.filtered - gain @ state
                 if self._unrolled is not None:
                     self._unrolled.advance(gain, last.offset)
@@ -148,15 +157,19 @@ class KalmanTrack:
                 for k in range(len(steps) - 2, index - 1, -1):
                     state = steps[k].offset + steps[k].gain @ state
         if target > steps[index].stamp:  # (at_step is False)
-            transition, _ = self.models.transition((target - steps[index].stamp) / NS)
+            transition, _, _ = self.models.transition(interval(target, steps[index].stamp))
             state = transition @ state
         return self.models.readout @ state
+
+    def newest_acceleration(self) -> np.ndarray:
+        """Each model's acceleration of every joint at the newest sample (models, m): the filtered one."""
+        return (self.models.readout[:, 2:3] @ self.steps[-1].filtered)[:, 0]
 
     def acceleration_variance(self) -> np.ndarray:
         """Each model's acceleration variance at the newest sample (models,): the filter's, the same
         for every joint of the group."""
-        row = self.models.readout[:, 2]  # (models, dim)
-        return np.einsum("md,mde,me->m", row, self.steps[-1].covariance, row)
+        row = self.models.readout[:, 2:3]  # (models, 1, dim)
+        return (row @ self.steps[-1].covariance @ row.transpose(0, 2, 1))[:, 0, 0]
 
     def forget_before(self, stamp: int) -> None:
         """Drop the steps no later estimate needs: all before the newest step at or before ``stamp``."""

@@ -39,8 +39,9 @@ MEMORY = 0.2
 """s: the time constant with which the models' scores forget."""
 NOISE_WINDOW = 64
 """Samples the white noise is read from (the newest)."""
-NOISE_EVERY = 8
-"""Samples between two readings of the noise (it changes slowly; reading it costs more than a step)."""
+NOISE_EVERY = 32
+"""Samples between two readings of the noise once the window is full (it changes slowly; reading it
+costs several steps)."""
 FALLBACK_NOISE = 1e-4
 """rad (m): the position noise before enough samples tell it."""
 NOISE_FLOOR = 1e-2
@@ -133,21 +134,20 @@ class KalmanBank:
         estimates = self.track.estimate(target)  # (M, 3, m)
         if len(estimates) == 1:
             return estimates[0]
-        return np.einsum("mj,mkj->kj", self.weights(), estimates)
+        return np.add.reduce(self.weights()[:, None, :] * estimates, axis=0)
 
     def acceleration_std(self) -> np.ndarray:
         """Each joint's acceleration standard deviation at the newest sample: the mixture's (each
         model's variance, and the spread of the models' estimates about the mixture)."""
         if not self.steps:
             return np.zeros(0)
-        target = self.steps[-1].stamp
-        estimates = self.track.estimate(target)[:, 2]  # (M, m)
+        estimates = self.track.newest_acceleration()  # (M, m)
         variances = self.track.acceleration_variance()[:, None]
         if len(estimates) == 1:
             return np.sqrt(np.broadcast_to(variances[0], estimates.shape[1:]))
         weights = self.weights()
-        mean = np.sum(weights * estimates, axis=0)
-        return np.sqrt(np.sum(weights * (variances + (estimates - mean) ** 2), axis=0))
+        mean = np.add.reduce(weights * estimates, axis=0)
+        return np.sqrt(np.add.reduce(weights * (variances + (estimates - mean) ** 2), axis=0))
 
     @property
     def nis(self) -> np.ndarray:

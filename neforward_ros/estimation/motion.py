@@ -36,6 +36,19 @@ TREND_JERK = 1e-2
 """Intensity of the white jerk that drives the trend, rad^2/s^5 (m^2/s^5 for prismatic joints)."""
 TREND_PRIOR = (10.0, 10.0, 100.0)
 """Standard deviations of the trend's position, velocity and acceleration before the first sample."""
+QUANTUM = 1e-6
+"""s: the resolution of the Kalman estimator's clock. The filter reads every stamp rounded to it
+(:func:`interval`), moving a sample in the model's time by at most half a microsecond (a
+two-thousandth of a 1 kHz interval, far below the jitter of drivers' stamps) and never drifting: the
+intervals of a jittering stream then share a few hundred transitions instead of one worked out per
+sample."""
+_TICK = round(QUANTUM * 1e9)  # ns
+
+
+def interval(later: int, earlier: int) -> float:
+    """s between two stamps (ns), each rounded to :data:`QUANTUM`: the filter's intervals."""
+    half = _TICK // 2
+    return ((later + half) // _TICK - (earlier + half) // _TICK) * QUANTUM
 
 
 @dataclass(frozen=True)
@@ -133,7 +146,7 @@ class MotionModel:
         """(F, Q) over dt seconds: x(t + dt) = F x(t) + w, w ~ N(0, Q). Kept for the intervals seen
         last (a steady rate has one or two): read-only arrays. Worked out as a bank of one model
         (:class:`MotionModels`), the arithmetic the filter runs."""
-        transition, noise = self._as_bank.transition(dt)
+        transition, noise, _ = self._as_bank.transition(dt)
         return transition[0], noise[0]
 
 
@@ -165,15 +178,18 @@ class MotionModels:
     def __len__(self) -> int:
         return len(self.models)
 
-    def transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """(F, Q) of every model over dt seconds, (models, dim, dim) each (see
-        :meth:`MotionModel.transition`); kept for the intervals seen last: read-only arrays."""
+    def transition(self, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(F, Q, F transposed) of every model over dt seconds, (models, dim, dim) each (see
+        :meth:`MotionModel.transition`), dt rounded to :data:`QUANTUM` (see :func:`interval`); kept for
+        the intervals seen last (with stamp jitter, a few hundred): read-only arrays."""
+        key = round(dt / QUANTUM)
         cache = self._transitions
-        found = cache.get(dt)
+        found = cache.get(key)
         if found is None:
-            if len(cache) >= 64:
+            if len(cache) >= 256:
                 cache.clear()
-            found = cache[dt] = self._transition(dt)
+            found = cache[key] = (*self._transition(key * QUANTUM),)
+            found = cache[key] = (*found, found[0].transpose(0, 2, 1))
             for array in found:
                 array.flags.writeable = False
         return found
