@@ -124,8 +124,8 @@ class KalmanTrack:
             innovation = positions - state[:, 0] - state[:, 3]  # (models, m)
             state = state + gain[:, :, None] * innovation[:, None, :]
             covariance = covariance - gain[:, :, None] * projected[:, None, :]
-            likelihood = -0.5 * (innovation**2 / variance + np.log(variance) + _LOG_2PI)
             self.nis = innovation**2 / variance
+            likelihood = -0.5 * (self.nis + np.log(variance) + _LOG_2PI)
         covariance = 0.5 * (covariance + covariance.transpose(0, 2, 1))
         self.steps.append(_Step(stamp, state, predicted, covariance))
         if self.smooth:

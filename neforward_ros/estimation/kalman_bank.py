@@ -154,7 +154,7 @@ class KalmanBank:
         """Each joint's normalised innovation squared at the last sample, of its best model."""
         best = np.argmax(self.scores, axis=0) if self.scores is not None else np.zeros(0, dtype=int)
         stacked = self.track.nis
-        return np.take_along_axis(stacked, best[None], 0)[0] if len(best) else stacked[0]
+        return stacked[best, np.arange(len(best))] if len(best) else stacked[0]
 
     def forget_before(self, stamp: int) -> None:
         self.track.forget_before(stamp)

@@ -189,7 +189,7 @@ class MotionModels:
             if len(cache) >= 256:
                 cache.clear()
             found = cache[key] = (*self._transition(key * QUANTUM),)
-            found = cache[key] = (*found, found[0].transpose(0, 2, 1))
+            found = cache[key] = (*found, np.ascontiguousarray(found[0].transpose(0, 2, 1)))
             for array in found:
                 array.flags.writeable = False
         return found

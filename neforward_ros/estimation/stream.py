@@ -41,6 +41,8 @@ STRAIN_LIMIT = 0.5
 """polyfit: the share of estimates at the smallest window above which a joint is said to strain."""
 INNOVATION_LIMIT = 5.0
 """kalman: how far the normalised innovations may average from 1 (above or below) before it is said."""
+MEMORY_EVERY = 16
+"""kalman: samples between two keepings of what a restart starts from (the noise read, the weights)."""
 
 _REPEATS = "repeats"
 
@@ -106,8 +108,10 @@ class StreamingEstimator:
         self._strain = np.zeros(len(self.joint_names))
         self._innovations = np.ones(len(self.joint_names))
         self._watched = np.zeros(len(self.joint_names), dtype=int)
-        self._noise_memory: dict[int, tuple[float | None, float | None]] = {}  # kalman: per joint, as read
-        self._score_memory: dict[int, np.ndarray] = {}  # kalman: per joint, its models' last log-weights
+        # kalman, per joint: the position and velocity noise variances as read (n, 2), and its models' last
+        # log-weights (models, n); NaN where not known
+        self._noise_memory = np.full((len(self.joint_names), 2), np.nan)
+        self._score_memory: np.ndarray | None = None
         self._clock: int | None = None
         self._origin = 0
         self.segment = 0
@@ -283,13 +287,12 @@ class StreamingEstimator:
         if fresh:
             track = None
             if self._kalman:  # what was read of the noise before a restart serves until it is read again
-                known = [self._noise_memory.get(j) for j in sorted(fresh)]
-                noise = tuple(
-                    max(v[i] for v in known) if all(v is not None and v[i] is not None for v in known) else None
-                    for i in range(2)
-                )
-                scores = [self._score_memory.get(j) for j in sorted(fresh)]
-                seeded = np.stack(scores, axis=1) if all(x is not None for x in scores) else None
+                known = self._noise_memory[sorted(fresh)]
+                noise = tuple(float(known[:, i].max()) if np.isfinite(known[:, i]).all() else None for i in range(2))
+                memory = self._score_memory
+                seeded = None if memory is None else memory[:, sorted(fresh)]
+                if seeded is not None and not np.isfinite(seeded).all():
+                    seeded = None
                 track = KalmanBank(self.settings.kalman, smooth=self._lag_ns > 0, known_noise=noise,
                                    known_scores=seeded)  # fmt: skip
             group = JointHistory(sorted(fresh), self._origin, track=track)
@@ -465,12 +468,9 @@ class StreamingEstimator:
         if len(nis) != len(group.joints):
             return
         joints = np.asarray(group.joints)
-        read = (track.read_noise.get("positions"), track.read_noise.get("velocities"))
-        weights = np.log(np.maximum(track.weights(), 1e-12)) if track.scores is not None else None
-        for k, j in enumerate(group.joints):  # what a restart starts from
-            self._noise_memory[j] = read
-            if weights is not None:
-                self._score_memory[j] = weights[:, k]
+        # what a restart starts from (it changes slowly: kept every MEMORY_EVERY samples)
+        if self._watched[joints[0]] % MEMORY_EVERY == 0:
+            self._remember(track, joints)
         innovations = (1.0 - STRAIN_MEMORY) * self._innovations[joints] + STRAIN_MEMORY * nis
         self._innovations[joints] = innovations
         self._watched[joints] += 1
@@ -500,6 +500,16 @@ class StreamingEstimator:
                     f"joint {name!r}: the kalman estimator's innovations are {what}; {fix}"
                 ),
             )
+
+    def _remember(self, track: KalmanBank, joints: np.ndarray) -> None:
+        """Keep what a restart of these joints starts from: the noise read and the models' weights."""
+        read = track.read_noise
+        self._noise_memory[joints] = (read.get("positions", np.nan), read.get("velocities", np.nan))
+        if track.scores is not None:
+            weights = track.weights()
+            if self._score_memory is None or len(self._score_memory) != len(weights):
+                self._score_memory = np.full((len(weights), len(self.joint_names)), np.nan)
+            self._score_memory[:, joints] = np.log(np.maximum(weights, 1e-12))
 
     def _say_why(self, group: JointHistory, reason: str) -> None:
         """Log once per warm-up (throttled) why a group's joints have no estimate; warn once per group
