@@ -256,3 +256,23 @@ def test_joint_estimates_publish_each_acceleration_and_its_deviation() -> None:
             assert np.median(error / sigma) >= 0.05  # a bound that says something
         else:
             assert all(s == [] for s in spread)  # a fixed window states none
+
+
+def test_the_bank_reads_no_noise_from_joints_at_rest_after_a_restart() -> None:
+    """A fresh bank (a restart) whose joints mostly rest at non-zero positions while one moves through
+    a 16-bit encoder, on jittered stamps: the resting joints' sixth differences are of rounding size
+    (1e-16 of their position), no evidence of noise; the noise read is the moving joint's, about its
+    encoder step / sqrt(12), not the floor (a floor of 1e-6 rad made the filter trust every sample
+    and its accelerations swing by tens of rad/s^2 after a time reset)."""
+    rng = np.random.default_rng(7)
+    count, step = 200, 2 * np.pi / 2**16
+    stamps = EPOCH_NS + np.cumsum(rng.integers(1_900_000, 2_100_000, count))
+    t = (stamps - stamps[0]) / 1e9
+    resting = np.array([0.31, -1.17, 2.05, 0.77, -0.42, 1.6])
+    moving = np.round(0.4 * np.sin(2.0 * t) / step) * step
+    bank = KalmanBank(KalmanSettings(), smooth=False)
+    missing = np.full(7, np.nan)
+    for k in range(count):
+        bank.add(int(stamps[k]), np.r_[resting, moving[k]], missing)
+    noise = np.sqrt(bank.read_noise["positions"])
+    assert 0.3 * step / np.sqrt(12) <= noise <= 3.0 * step, (noise, step / np.sqrt(12))

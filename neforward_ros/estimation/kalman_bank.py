@@ -198,7 +198,9 @@ class KalmanBank:
         self._steps[kind] = seen
         known = np.where(np.isfinite(seen), seen, 0.0)
         variance = np.maximum(white**2, known**2 / 12.0)
-        told = np.isfinite(seen) | (white > 0.0)
+        # a joint at rest gives sixth differences of rounding size (its constant times the weights' sum,
+        # about 1e-16 of it): no evidence of a noise below the floor
+        told = np.isfinite(seen) | (white > fallback * NOISE_FLOOR)
         if not told.any():
             known = self.known_noise.get(kind)
             return known if known is not None else fallback**2
