@@ -1,0 +1,92 @@
+"""Stamps written after the sample: a driver that samples on a steady clock and stamps each message when
+it writes it, a varying delay later (issue 26: such a stream must not read as noise).
+
+The motions of ``motion_family.py`` (1.5 Hz sines, a gait, minimum-jerk moves) are sampled on an exact
+grid at 100, 500 and 1000 Hz through a 16-bit encoder, and fed one message at a time to every
+documented setting twice: stamped with the sample times, and stamped 0-40 % of a period after them
+(uniform, independent). Printed per case and setting: q-ddot's relative RMS error against the true
+acceleration at the sample (after the first second and before the last half second) with the true
+stamps and with the written ones, and their ratio. The estimators take the stamps as the sample
+times: with written stamps the motion between a sample and its stamp (velocity x delay) reads as
+noise, of a size that changes with the velocity.
+
+Usage: python bench/bench_write_jitter.py
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from motion_family import gait, min_jerk, sines
+
+from neforward_ros.estimation.settings import StreamSettings
+from neforward_ros.estimation.stream import StreamingEstimator
+
+SETTINGS = {
+    "polyfit fixed_lag (default)": StreamSettings(),
+    "kalman fixed_lag (20 ms)": StreamSettings(method="kalman"),
+    "kalman causal": StreamSettings(method="kalman", mode="causal"),
+    "polyfit causal": StreamSettings(mode="causal"),
+}
+DELAY = 0.4
+"""The longest write delay, in sample periods."""
+SEED = 300
+
+
+def motion(kind: str, t: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    if kind == "sines1.5":
+        return sines(t, 1.5, rng, 3)
+    if kind == "minjerk":
+        return min_jerk(t, rng, 3)
+    return gait(t, rng, 3)
+
+
+def error(stamps_s: np.ndarray, q: np.ndarray, qdd: np.ndarray, t: np.ndarray, settings: StreamSettings) -> float:
+    """q-ddot's relative RMS error of a setting fed (stamps, q), against qdd at the samples."""
+    names = [f"j{k}" for k in range(q.shape[1])]
+    estimator = StreamingEstimator(names, settings=settings, log=lambda level, message: None)
+    stamps = (stamps_s * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
+    out: dict[int, np.ndarray] = {}
+    for k in range(len(stamps)):
+        for estimate in estimator.update(int(stamps[k]), names, q[k].tolist()):
+            if estimate.ready.all():
+                out[estimate.stamp_ns] = estimate.accelerations
+    index = np.searchsorted(stamps, np.array(sorted(out)))
+    values = np.array([out[s] for s in sorted(out)])
+    keep = (t[index] > 1.0) & (t[index] < t[-1] - 0.5)
+    truth = qdd[index][keep]
+    return float(np.sqrt(np.mean((values[keep] - truth) ** 2) / np.mean(truth**2)))
+
+
+def main() -> None:
+    print(f"stamps written 0-{DELAY:.0%} of a period after the sample; q-ddot relative RMS error, "
+          "true stamps -> written stamps (ratio)")  # fmt: skip
+    print(f"{'motion':<10}{'rate':>6}  " + "".join(f"{name:>36}" for name in SETTINGS))
+    ratios: dict[str, list[float]] = {name: [] for name in SETTINGS}
+    for kind in ("sines1.5", "gait", "minjerk"):
+        for rate in (100, 500, 1000):
+            rng = np.random.default_rng(SEED)
+            t = np.arange(int(8 * rate)) / rate
+            q, qdd = motion(kind, t, rng)
+            step = 2 * np.pi / 2**16
+            measured = np.round(q / step) * step
+            written = t + rng.uniform(0.0, DELAY / rate, len(t))
+            row = []
+            for name, settings in SETTINGS.items():
+                true_error = error(t, measured, qdd, t, settings)
+                written_error = error(written, measured, qdd, t, settings)
+                ratios[name].append(written_error / true_error)
+                row.append(f"{true_error:9.2%} -> {written_error:8.2%} ({written_error / true_error:6.1f}x)")
+            print(f"{kind:<10}{rate:>6}  " + "".join(f"{cell:>36}" for cell in row), flush=True)
+    print()
+    for name, values in ratios.items():
+        print(f"{name}: written stamps' error over the true stamps' median {np.median(values):.1f}x, "
+              f"worst {max(values):.1f}x")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
