@@ -45,8 +45,9 @@ def motion(kind: str, t: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarr
     return gait(t, rng, 3)
 
 
-def error(stamps_s: np.ndarray, q: np.ndarray, qdd: np.ndarray, t: np.ndarray, settings: StreamSettings) -> float:
-    """q-ddot's relative RMS error of a setting fed (stamps, q), against qdd at the samples."""
+def estimates(stamps_s: np.ndarray, q: np.ndarray, settings: StreamSettings):
+    """(sample index (k,), q-ddot (k, n), the estimator) of a setting fed (stamps s, q) one message at
+    a time: the estimates every joint of which is ready."""
     names = [f"j{k}" for k in range(q.shape[1])]
     estimator = StreamingEstimator(names, settings=settings, log=lambda level, message: None)
     stamps = (stamps_s * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
@@ -56,7 +57,12 @@ def error(stamps_s: np.ndarray, q: np.ndarray, qdd: np.ndarray, t: np.ndarray, s
             if estimate.ready.all():
                 out[estimate.stamp_ns] = estimate.accelerations
     index = np.searchsorted(stamps, np.array(sorted(out)))
-    values = np.array([out[s] for s in sorted(out)])
+    return index, np.array([out[s] for s in sorted(out)]), estimator
+
+
+def error(stamps_s: np.ndarray, q: np.ndarray, qdd: np.ndarray, t: np.ndarray, settings: StreamSettings) -> float:
+    """q-ddot's relative RMS error of a setting fed (stamps, q), against qdd at the samples."""
+    index, values, _ = estimates(stamps_s, q, settings)
     keep = (t[index] > 1.0) & (t[index] < t[-1] - 0.5)
     truth = qdd[index][keep]
     return float(np.sqrt(np.mean((values[keep] - truth) ** 2) / np.mean(truth**2)))

@@ -1,0 +1,77 @@
+"""Stamps written after the sample (:mod:`neforward_ros.estimation.clock`): the recovered clock against
+the true sample times, and the Kalman bank on such a stream against the same stream stamped at the
+samples; a stream stamped at its (jittered) samples keeps its stamps."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from neforward_ros.estimation.clock import WriteClock
+from neforward_ros.estimation.settings import StreamSettings
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from bench_write_jitter import estimates
+from motion_family import gait, sines
+
+EPOCH_NS = 1_700_000_000 * 10**9
+
+
+@pytest.mark.parametrize("delay", [0.1, 0.4, 0.7])
+@pytest.mark.parametrize("period_ns", [1_000_000, 10_000_000])
+def test_the_clock_recovers_the_sample_times_under_write_delays_and_drops(delay: float, period_ns: int) -> None:
+    rng = np.random.default_rng(int(delay * 10) + period_ns // 1_000_000)
+    count = 6000
+    grid = EPOCH_NS + np.arange(count, dtype=np.int64) * period_ns
+    stamps = grid + rng.integers(0, int(delay * period_ns), count)
+    kept = rng.random(count) > 0.05  # dropped samples: the clock counts their periods
+    grid, stamps = grid[kept], stamps[kept]
+    clock = WriteClock()
+    recovered = np.array([clock.update(int(s), period_ns / 1e9 if k else None) for k, s in enumerate(stamps)])
+    settled = slice(300, None)
+    error = (recovered - grid)[settled]
+    jitter = (stamps - grid)[settled]
+    assert np.std(error) <= 0.1 * np.std(jitter), (np.std(error) / period_ns, np.std(jitter) / period_ns)
+    assert np.max(np.abs(error - np.mean(error))) <= 0.05 * period_ns
+    assert np.all(np.diff(recovered) > 0)
+
+
+def _error(stamps_s: np.ndarray, q: np.ndarray, qdd: np.ndarray, t: np.ndarray, settings: StreamSettings):
+    """q-ddot's relative RMS error against the truth at the samples, and whether the bank took the
+    stamps for write times."""
+    index, values, estimator = estimates(stamps_s, q, settings)
+    keep = (t[index] > 1.5) & (t[index] < t[-1] - 0.5)
+    truth = qdd[index][keep]
+    error = float(np.sqrt(np.mean((values[keep] - truth) ** 2) / np.mean(truth**2)))
+    return error, estimator._groups[0].track.written
+
+
+@pytest.mark.parametrize("mode", ["fixed_lag", "causal"])
+@pytest.mark.parametrize("kind, rate", [("sines", 500.0), ("gait", 1000.0)])
+def test_the_kalman_bank_on_write_stamps_is_as_accurate_as_on_sample_stamps(kind: str, rate: float, mode: str):
+    rng = np.random.default_rng(41)
+    t = np.arange(int(6 * rate)) / rate
+    q, qdd = sines(t, 2.0, rng, 3) if kind == "sines" else gait(t, rng, 3)
+    step = 2 * np.pi / 2**16
+    measured = np.round(q / step) * step
+    written = t + rng.uniform(0.0, 0.5 / rate, len(t))
+    settings = StreamSettings(method="kalman", mode=mode)
+    on_samples, taken_for_written = _error(t, measured, qdd, t, settings)
+    on_writes, found = _error(written, measured, qdd, t, settings)
+    assert not taken_for_written and found
+    assert on_writes <= 1.5 * on_samples, (on_writes, on_samples)
+
+
+def test_stamps_of_jittered_samples_are_kept() -> None:
+    """A driver that samples with jitter and stamps each sample with its own time: the recovered
+    clock would move the samples off their times; the bank keeps the stamps."""
+    rng = np.random.default_rng(43)
+    rate = 500.0
+    t = (np.arange(int(5 * rate)) + rng.uniform(-0.1, 0.1, int(5 * rate))) / rate
+    q, qdd = sines(t, 1.5, rng, 3)
+    step = 2 * np.pi / 2**20
+    _, taken_for_written = _error(t, np.round(q / step) * step, qdd, t, StreamSettings(method="kalman"))
+    assert not taken_for_written
