@@ -106,8 +106,8 @@ class KalmanBank:
         self._velocities: deque[tuple[float, float, np.ndarray]] = deque(maxlen=NOISE_WINDOW)
         self.clock = WriteClock()
         self.written = False
-        self._reads = 0  # readings of the position noise while the stamps are taken for sample times
         """Whether the stamps were found to be write times: the filter then runs on the recovered clock."""
+        self._reads = 0  # readings of the position noise while the stamps are taken for sample times
         self._models: deque[tuple[int, int]] = deque()  # (stamp, the filter's time) of the steps kept
         self._steps: dict[str, np.ndarray] = {}  # the smallest change seen so far, per joint: an encoder's step
         self.read_noise: dict[str, float] = {}  # the variances read from the samples so far
