@@ -21,17 +21,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_transients import SETTINGS  # every documented setting
 from motion_family import gait, min_jerk, sines
 
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
 
-SETTINGS = {
-    "polyfit fixed_lag (default)": StreamSettings(),
-    "kalman fixed_lag (20 ms)": StreamSettings(method="kalman"),
-    "kalman causal": StreamSettings(method="kalman", mode="causal"),
-    "polyfit causal": StreamSettings(mode="causal"),
-}
 DELAY = 0.4
 """The longest write delay, in sample periods."""
 SEED = 300

@@ -188,8 +188,8 @@ class MotionModels:
         if found is None:
             if len(cache) >= 256:
                 cache.clear()
-            found = cache[key] = (*self._transition(key * QUANTUM),)
-            found = cache[key] = (*found, np.ascontiguousarray(found[0].transpose(0, 2, 1)))
+            transition, noise = self._transition(key * QUANTUM)
+            found = cache[key] = (transition, noise, np.ascontiguousarray(transition.transpose(0, 2, 1)))
             for array in found:
                 array.flags.writeable = False
         return found
