@@ -55,12 +55,15 @@ def estimates(stamps_s: np.ndarray, q: np.ndarray, settings: StreamSettings):
     return index, np.array([out[s] for s in sorted(out)]), estimator
 
 
-def error(stamps_s: np.ndarray, q: np.ndarray, qdd: np.ndarray, t: np.ndarray, settings: StreamSettings) -> float:
-    """q-ddot's relative RMS error of a setting fed (stamps, q), against qdd at the samples."""
-    index, values, _ = estimates(stamps_s, q, settings)
-    keep = (t[index] > 1.0) & (t[index] < t[-1] - 0.5)
+def error(
+    stamps_s: np.ndarray, q: np.ndarray, qdd: np.ndarray, t: np.ndarray, settings: StreamSettings, settled: float = 1.0
+) -> tuple[float, StreamingEstimator]:
+    """q-ddot's relative RMS error of a setting fed (stamps, q), against qdd at the samples from ``settled``
+    s on to the last half second; and the estimator."""
+    index, values, estimator = estimates(stamps_s, q, settings)
+    keep = (t[index] > settled) & (t[index] < t[-1] - 0.5)
     truth = qdd[index][keep]
-    return float(np.sqrt(np.mean((values[keep] - truth) ** 2) / np.mean(truth**2)))
+    return float(np.sqrt(np.mean((values[keep] - truth) ** 2) / np.mean(truth**2))), estimator
 
 
 def main() -> None:
@@ -78,8 +81,8 @@ def main() -> None:
             written = t + rng.uniform(0.0, DELAY / rate, len(t))
             row = []
             for name, settings in SETTINGS.items():
-                true_error = error(t, measured, qdd, t, settings)
-                written_error = error(written, measured, qdd, t, settings)
+                true_error, _ = error(t, measured, qdd, t, settings)
+                written_error, _ = error(written, measured, qdd, t, settings)
                 ratios[name].append(written_error / true_error)
                 row.append(f"{true_error:9.2%} -> {written_error:8.2%} ({written_error / true_error:6.1f}x)")
             print(f"{kind:<10}{rate:>6}  " + "".join(f"{cell:>36}" for cell in row), flush=True)

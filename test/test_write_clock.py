@@ -14,7 +14,7 @@ from neforward_ros.estimation.clock import WriteClock
 from neforward_ros.estimation.settings import StreamSettings
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from bench_write_jitter import estimates
+from bench_write_jitter import error
 from motion_family import gait, sines
 
 EPOCH_NS = 1_700_000_000 * 10**9
@@ -42,11 +42,8 @@ def test_the_clock_recovers_the_sample_times_under_write_delays_and_drops(delay:
 def _error(stamps_s: np.ndarray, q: np.ndarray, qdd: np.ndarray, t: np.ndarray, settings: StreamSettings):
     """q-ddot's relative RMS error against the truth at the samples, and whether the bank took the
     stamps for write times."""
-    index, values, estimator = estimates(stamps_s, q, settings)
-    keep = (t[index] > 1.5) & (t[index] < t[-1] - 0.5)
-    truth = qdd[index][keep]
-    error = float(np.sqrt(np.mean((values[keep] - truth) ** 2) / np.mean(truth**2)))
-    return error, estimator._groups[0].track.written
+    relative, estimator = error(stamps_s, q, qdd, t, settings, settled=1.5)
+    return relative, estimator._groups[0].track.written
 
 
 @pytest.mark.parametrize("mode", ["fixed_lag", "causal"])

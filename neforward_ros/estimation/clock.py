@@ -22,6 +22,7 @@ their times.
 
 from __future__ import annotations
 
+import copy
 from collections import deque
 
 import numpy as np
@@ -105,9 +106,6 @@ class WriteClock:
             self._line = (int(stamps[b]), int(indices[b]), float(period))
 
     def copy(self) -> WriteClock:
-        clock = WriteClock()
-        clock.recovered, clock._last, clock._index = self.recovered, self._last, self._index
+        clock = copy.copy(self)
         clock._marks = deque(self._marks, maxlen=SPAN)
-        clock._line, clock._unfitted = self._line, self._unfitted
-        clock._time, clock._step, clock._delay = self._time, self._step, self._delay
         return clock

@@ -37,7 +37,7 @@ import numpy as np
 from neforward_ros.estimation.adaptive import noise_of
 from neforward_ros.estimation.clock import WriteClock
 from neforward_ros.estimation.kalman import KalmanTrack
-from neforward_ros.estimation.motion import KalmanSettings, MotionModel, MotionModels
+from neforward_ros.estimation.motion import TICK_NS, KalmanSettings, MotionModel, MotionModels
 from neforward_ros.stamps import NS
 
 LENGTH_SCALES = (0.04, 0.1, 0.25, 0.6)
@@ -132,7 +132,7 @@ class KalmanBank:
         self._tune_noise(stamp, recovered, positions, velocities)
         model = stamp
         if self.written:  # the recovered time, after the filter's newest (which may be a stamp)
-            model = recovered if not self._models else max(recovered, self._models[-1][1] + 1000)
+            model = recovered if not self._models else max(recovered, self._models[-1][1] + TICK_NS)
         self._models.append((stamp, model))
         likelihoods = self.track.add(model, positions, velocities)
         if self.scores is None or self._last is None:

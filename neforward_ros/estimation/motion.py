@@ -42,13 +42,14 @@ QUANTUM = 1e-6
 two-thousandth of a 1 kHz interval, far below the jitter of drivers' stamps) and never drifting: the
 intervals of a jittering stream then share a few hundred transitions instead of one worked out per
 sample."""
-_TICK = round(QUANTUM * 1e9)  # ns
+TICK_NS = round(QUANTUM * 1e9)
+"""ns: :data:`QUANTUM`, the least interval between two of the filter's steps."""
 
 
 def interval(later: int, earlier: int) -> float:
     """s between two stamps (ns), each rounded to :data:`QUANTUM`: the filter's intervals."""
-    half = _TICK // 2
-    return ((later + half) // _TICK - (earlier + half) // _TICK) * QUANTUM
+    half = TICK_NS // 2
+    return ((later + half) // TICK_NS - (earlier + half) // TICK_NS) * QUANTUM
 
 
 @dataclass(frozen=True)
