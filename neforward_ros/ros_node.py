@@ -176,6 +176,8 @@ def main(args: list[str] | None = None) -> int:
         except (KeyboardInterrupt, ExternalShutdownException):
             raise
         except Exception as exc:
+            if not rclpy.ok():  # Ctrl-C during start-up: rclpy's handler invalidated the context first, and
+                return 0  # the call that failed on it raised this, not KeyboardInterrupt
             print(f"{NODE_NAME}: error: {exc}", file=sys.stderr)
             return 1
         # Everything allocated so far lives as long as the node: keep it out of the collector's full
