@@ -48,6 +48,7 @@ bench: $(VENV)/.installed-test $(if $(HAVE_ROS),$(ROS_VENV)/.installed)
 	$(BIN)/python bench/bench_realdata.py
 	$(BIN)/python bench/bench_bag.py
 	$(BIN)/python bench/bench_bag.py --long
+	$(BIN)/python bench/bench_fit.py
 	$(BIN)/python bench/bench_fleet.py
 	$(BIN)/python bench/bench_dds.py
 	$(BIN)/python bench/bench_contact.py --live

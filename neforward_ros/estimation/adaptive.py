@@ -33,6 +33,12 @@ dominates (slow motion, noisy samples), the error is within it as a Gaussian's i
 motion's curvature dominates, the window's bias adds to it, which the rule keeps within a few of them
 (a larger bias breaks the intersection): not a bound to rely on there.
 
+The default fit runs the rule twice, with polynomials of degree 6 and of degree 4 (``lower``), and keeps
+the degree-4 choice where the two agree within G of their combined deviations and it is the less noisy,
+the degree-6 one elsewhere: a slow, noisy motion keeps the quieter degree 4 over the largest window,
+and a fast one (a 5 Hz sine, a move's corner) the degree 6, whose bias lets the rule keep windows
+about twice as wide as degree 4's for the same error.
+
 The node (one target at a time, :func:`adaptive_fit`) and the bag tool (every target at once,
 :func:`adaptive_fits`) take the same windows, noise and rule: the same estimates.
 """
@@ -215,8 +221,27 @@ def _lead(level_half_width: float, lead: float) -> float:
     return min(lead, level_half_width)
 
 
+def fused(high: tuple[np.ndarray, ...], low: tuple[np.ndarray, ...], derivative: np.ndarray | int) -> tuple:
+    """Two degrees' choices, each (value, first, second derivative, standard deviation, ...) of one
+    fit, joined column by column: the lower degree's where its estimate of the ``derivative``-th
+    derivative (2 or 1, per column or for all) agrees with the higher's within :data:`GAMMA` of
+    their combined deviations and it is the less noisy, the higher degree's elsewhere."""
+    second = np.asarray(derivative) == 2
+    estimate_high, estimate_low = np.where(second, high[2], high[1]), np.where(second, low[2], low[1])
+    agree = np.abs(estimate_low - estimate_high) <= GAMMA * np.hypot(low[3], high[3])
+    take_low = agree & (low[3] <= high[3])
+    return tuple(np.where(take_low, b, a) for a, b in zip(high, low, strict=True))
+
+
 def adaptive_fits(
-    t: np.ndarray, y: np.ndarray, targets: np.ndarray, h_max: float, order: int, lead: float, derivative: int = 2
+    t: np.ndarray,
+    y: np.ndarray,
+    targets: np.ndarray,
+    h_max: float,
+    order: int,
+    lead: float,
+    derivative: int = 2,
+    lower: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Value, first and second derivative at each target (M, n), each column's window chosen by the
     ICI rule on its ``derivative``-th derivative (2 for positions; 1 for measured velocities, whose
@@ -228,27 +253,39 @@ def adaptive_fits(
         h_max: the largest half-width, s.
         order: polynomial degree.
         lead: the largest reach past the target, s (h_max for a centred fit, 0 for a causal one).
+        lower: a second, lower degree whose choice is :func:`fused` with ``order``'s; None: ``order`` alone.
     """
     library = native_fit.FIT.get(wait=len(targets) >= native_fit.WORTH_WAITING)
     columns = np.full(y.shape[1], derivative)
     got = None if library is None else native_fit.fits(library, t, y, targets, *_ladder_and_leads(h_max, lead), order,
-                                                       columns, GAMMA, ROUGHNESS, _GAIN, FLOOR, GROWTH)  # fmt: skip
+                                                       columns, GAMMA, ROUGHNESS, _GAIN, FLOOR, GROWTH,
+                                                       lower)  # fmt: skip
     if got is None:
-        return python_adaptive_fits(t, y, targets, h_max, order, lead, derivative)
+        return python_adaptive_fits(t, y, targets, h_max, order, lead, derivative, lower)
     out, done = got
     estimates = [np.ascontiguousarray(out[:, k]) for k in range(4)]
     if not done.all():  # too few samples in a target's largest window: numpy's fits serve there
         rest = np.flatnonzero(~done)
-        numpy_fits = python_adaptive_fits(t, y, targets[rest], h_max, order, lead, derivative)
+        numpy_fits = python_adaptive_fits(t, y, targets[rest], h_max, order, lead, derivative, lower)
         for whole, part in zip(estimates, numpy_fits, strict=True):
             whole[rest] = part
     return estimates[0], estimates[1], estimates[2], estimates[3]
 
 
 def python_adaptive_fits(
-    t: np.ndarray, y: np.ndarray, targets: np.ndarray, h_max: float, order: int, lead: float, derivative: int = 2
+    t: np.ndarray,
+    y: np.ndarray,
+    targets: np.ndarray,
+    h_max: float,
+    order: int,
+    lead: float,
+    derivative: int = 2,
+    lower: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`adaptive_fits` in numpy."""
+    """:func:`adaptive_fits` in numpy (two degrees fused: each fitted on its own)."""
+    if lower is not None:
+        high = python_adaptive_fits(t, y, targets, h_max, order, lead, derivative)
+        return fused(high, python_adaptive_fits(t, y, targets, h_max, lower, lead, derivative), derivative)  # type: ignore[return-value]
     levels = ladder(h_max)
     first_lead = _lead(levels[0], lead)
     lo = np.searchsorted(t, targets + first_lead - 2.0 * levels[0], side="left")
@@ -309,6 +346,7 @@ def adaptive_fit(
     order: int,
     lead: float,
     derivative: np.ndarray,
+    lower: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`adaptive_fits` at one target (the stream's): ``times, values`` the samples of the
     largest window ([target + lead - 2 h_max, target + lead]), which the noise is read from too;
@@ -318,16 +356,20 @@ def adaptive_fit(
     vary beyond a smooth motion by more than :data:`ROUGHNESS` of their spread in the window (noise,
     or a motion too fast for the rate: the two look alike to differences). Every level's fit in one
     vectorised pass, with the arithmetic of :func:`neforward_ros.estimation.fit.polynomial_fits`; or,
-    once compiled, the same in one C call (:mod:`neforward_ros.estimation.native_fit`)."""
+    once compiled, the same in one C call (:mod:`neforward_ros.estimation.native_fit`). ``lower``: as
+    for :func:`adaptive_fits`."""
     library = native_fit.FIT.get()
     if library is not None:
         got = native_fit.fit(
             library, times, values, target, *_ladder_and_leads(h_max, lead), order, derivative, GAMMA, ROUGHNESS,
-            _GAIN, FLOOR, GROWTH,
+            _GAIN, FLOOR, GROWTH, lower,
         )  # fmt: skip
         if got is not None:
             return got
-    return python_adaptive_fit(times, values, target, h_max, order, lead, derivative)
+    high = python_adaptive_fit(times, values, target, h_max, order, lead, derivative)
+    if lower is None:
+        return high
+    return fused(high, python_adaptive_fit(times, values, target, h_max, lower, lead, derivative), derivative)  # type: ignore[return-value]
 
 
 def python_adaptive_fit(

@@ -15,7 +15,7 @@ import numpy as np
 
 from neforward_ros.errors import InputError
 from neforward_ros.estimation.adaptive import adaptive_fits
-from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW, check_settings, local_polynomial
+from neforward_ros.estimation.fit import DEFAULT_WINDOW, check_settings, default_lower, default_order, local_polynomial
 from neforward_ros.stamps import relative_seconds
 
 
@@ -25,7 +25,7 @@ def estimate_derivatives(
     *,
     method: str = "polyfit",
     window: float = DEFAULT_WINDOW,
-    order: int = DEFAULT_ORDER,
+    order: int | None = None,
     wrap: Sequence[bool] | None = None,
     adaptive: bool = True,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -37,7 +37,8 @@ def estimate_derivatives(
         method: ``"polyfit"`` (local polynomial fit, default) or ``"difference"``.
         window: full width in seconds of the local fit (polyfit). A window holding fewer than
             ``order + 1`` samples is widened to the ``order + 1`` nearest samples.
-        order: degree of the local polynomial (polyfit), at least 2.
+        order: degree of the local polynomial (polyfit), at least 2; None: 6 fused with 4 for the
+            adaptive fit, 4 for the fixed window (:func:`~neforward_ros.estimation.fit.default_order`).
         wrap: per column, True for a continuous joint whose positions wrap at +-pi; those
             columns are unwrapped before differentiating.
         adaptive: polyfit: each column's window chosen per sample, up to ``window``, by the
@@ -58,6 +59,8 @@ def estimate_derivatives(
         positions = positions[:, None]
     if positions.ndim != 2 or positions.shape[0] != seconds.shape[0]:
         raise InputError(f"q has shape {np.shape(q)}; expected ({len(seconds)},) or ({len(seconds)}, n) to match t")
+    lower = default_lower(order, adaptive, causal=False)
+    order = default_order(adaptive, causal=False) if order is None else order
     check_settings(method, window, order)
     if len(seconds) < 3:
         raise InputError(f"need at least 3 samples to estimate accelerations, got {len(seconds)}")
@@ -81,7 +84,7 @@ def estimate_derivatives(
         qd = np.gradient(positions, seconds, axis=0, edge_order=2)
         qdd = np.gradient(qd, seconds, axis=0, edge_order=2)
     elif adaptive:
-        _, qd, qdd, _ = adaptive_fits(seconds, positions, seconds, window / 2.0, order, window / 2.0)
+        _, qd, qdd, _ = adaptive_fits(seconds, positions, seconds, window / 2.0, order, window / 2.0, lower=lower)
     else:
         _, qd, qdd = local_polynomial(seconds, positions, seconds, window / 2.0, order)
     if one_dimensional:
@@ -97,7 +100,7 @@ def estimate_at(
     velocity: np.ndarray | None = None,
     method: str = "polyfit",
     window: float = DEFAULT_WINDOW,
-    order: int = DEFAULT_ORDER,
+    order: int | None = None,
     adaptive: bool = True,
     spread: bool = False,
 ) -> tuple[np.ndarray, ...]:
@@ -121,6 +124,8 @@ def estimate_at(
     Returns:
         three (M, m) arrays (four with ``spread``).
     """
+    lower = default_lower(order, adaptive, causal=False)
+    order = default_order(adaptive, causal=False) if order is None else order
     check_settings(method, window, order)
     index = np.minimum(np.searchsorted(t, targets), len(t) - 1)
     exact = t[index] == targets
@@ -133,10 +138,12 @@ def estimate_at(
     elif adaptive:
         half_width = window / 2.0
         if velocity is None:
-            q_at, qd_at, qdd_at, std = adaptive_fits(t, q, targets, half_width, order, half_width)
+            q_at, qd_at, qdd_at, std = adaptive_fits(t, q, targets, half_width, order, half_width, lower=lower)
         else:  # the window chosen on the velocities, whose derivative is the acceleration
-            q_at, _, _, _ = adaptive_fits(t, q, targets, half_width, order, half_width)
-            qd_at, qdd_at, _, std = adaptive_fits(t, velocity, targets, half_width, order, half_width, derivative=1)
+            q_at, _, _, _ = adaptive_fits(t, q, targets, half_width, order, half_width, lower=lower)
+            qd_at, qdd_at, _, std = adaptive_fits(
+                t, velocity, targets, half_width, order, half_width, derivative=1, lower=lower
+            )
     else:
         half_width = window / 2.0
         q_at, qd_at, qdd_at = local_polynomial(t, q, targets, half_width, order)

@@ -16,7 +16,27 @@ METHODS = ("polyfit", "difference")
 DEFAULT_WINDOW = 0.2
 """Full width of the local fit, s."""
 DEFAULT_ORDER = 4
-"""Degree of the local polynomial."""
+"""Degree of the local polynomial of a fixed window or of a causal fit (one-sided windows: a higher
+degree's noise grows fastest where they extrapolate, at the newest sample)."""
+ADAPTIVE_ORDER = 6
+"""Degree of the adaptive fit's polynomials where the windows reach past the estimate (fixed lag, whole
+recordings), fused with :data:`DEFAULT_ORDER`'s (:func:`~neforward_ros.estimation.adaptive.fused`):
+the intersection-of-confidence-intervals rule shrinks a window whose bias shows, and degree 6 lets it
+keep windows about twice as wide on fast motions as degree 4 does for the same bias, while slow, noisy
+motions keep degree 4's quieter fit over the largest window."""
+
+
+def default_order(adaptive: bool, causal: bool) -> int:
+    """The polynomial degree a polyfit setting takes when none is given: :data:`ADAPTIVE_ORDER` for
+    adaptive windows that reach past the estimate, :data:`DEFAULT_ORDER` otherwise."""
+    return ADAPTIVE_ORDER if adaptive and not causal else DEFAULT_ORDER
+
+
+def default_lower(order: int | None, adaptive: bool, causal: bool) -> int | None:
+    """The second degree the adaptive fit fuses with :func:`default_order`'s when no degree is given
+    (:data:`DEFAULT_ORDER`), or None: a degree given, a fixed window, or a causal fit."""
+    return DEFAULT_ORDER if order is None and adaptive and not causal else None
+
 
 _CHUNK = 2048  # targets per vectorised block: bounds memory (about 2 order + 1 + n numbers per target and
 # window sample) and keeps a block in cache

@@ -8,7 +8,11 @@ nested, so each sample's powers are added once, ring by ring from the smallest w
 the largest window's unit, rescaled per level: inner sums never come from differences of larger
 ones), where the Python function fits each level on its own; and the normal equations are inverted
 by a Cholesky factorisation where numpy calls LAPACK. The two agree to rounding (tested, with the
-same window chosen).
+same window chosen). Two degrees fused (the default's 6 and 4) come from one call: the lower degree's
+normal equations are the leading rows and columns of the higher's, so both share the power sums and
+the noise reading. A whole recording's targets (``adaptive_fits``) take each block's sixth differences
+from one pass, the same numbers added in the same order as for one target: the node and the bag tool
+give bitwise the same estimates (tested).
 
 Compiled with the system's C compiler (``cc``, ``$CC``) on first use, in a thread, and kept in the
 disk cache (:mod:`neforward_ros.disk_cache`, ``kernels/``); until it is ready, and where there is no
@@ -89,11 +93,6 @@ static int spd_inverse(const double *a, long d, double *inv) {
     return 1;
 }
 
-/* See adaptive_fit in neforward_ros/estimation/adaptive.py. times (count,), values (count, n)
-   row-major; levels, leads (nlevels,) the half-widths (largest first) and their leads; derivative
-   (n,) 2 or 1. out (5, n): value, first and second derivative, the chosen derivative's standard
-   deviation, strained (1 or 0). Returns 0 when done, 1 when the largest window is too small (the
-   caller's function serves), 2 when memory runs out. */
 /* the weights of the sixth divided difference of t[0], t[s], ..., t[6 s], scaled to unit norm: the
    combination of seven samples that vanishes on every polynomial of degree 5 through their stamps */
 static void divided_weights(const double *t, long s, double *w) {
@@ -110,23 +109,115 @@ static void divided_weights(const double *t, long s, double *w) {
     for (long k = 0; k < 7; k++) w[k] *= norm;
 }
 
-int adaptive_fit(long count, const double *times, const double *values, long n, double target,
-                 long nlevels, const double *levels, const double *leads, long order,
-                 const long *derivative, double gamma, double roughness, double sixth_gain,
-                 double floor_, double growth, double *out) {
-    long d = order + 1, lo[64], hi[64], valid = 0;
-    if (nlevels > 64 || d > 16 || n < 1) return 1;
+/* One level's fit of degree `order` from the power sums (sums[k] = sum of u^k, moments[k n + j] = sum
+   of u^k y_j, u in the largest window's unit h0) into fit (n, 5): value, first and second derivative,
+   and the chosen derivative's variance factor for unit noise. 0 if the normal equations are singular. */
+static int level_fit(const double *sums, const double *moments, long n, long order, double h, double h0,
+                     const long *derivative, double *fit) {
+    long d = order + 1;
+    double gram[16 * 16], inv[16 * 16], r = h0 / h, scale[33];
+    scale[0] = 1.0;
+    for (long k = 1; k <= 2 * order; k++) scale[k] = scale[k - 1] * r;
+    for (long a = 0; a < d; a++)
+        for (long b = 0; b < d; b++) gram[a * d + b] = sums[a + b] * scale[a + b];
+    if (!spd_inverse(gram, d, inv)) return 0;
+    for (long j = 0; j < n; j++) {
+        double c[3] = {0.0, 0.0, 0.0};
+        for (long q = 0; q < 3; q++)
+            for (long k = 0; k < d; k++) c[q] += inv[q * d + k] * (moments[k * n + j] * scale[k]);
+        double *f = fit + j * 5;
+        f[0] = c[0];
+        f[1] = c[1] / h;
+        f[2] = 2.0 * c[2] / (h * h);
+        f[3] = derivative[j] == 2 ? 4.0 * inv[2 * d + 2] / (h * h * h * h) : inv[1 * d + 1] / (h * h);
+    }
+    return 1;
+}
+
+/* The ICI rule over the `valid` levels' fits (valid, n, 5) of one degree, into out (5, n): value,
+   first and second derivative, standard deviation, strained. */
+static void choose(double *fits, long valid, long n, const long *lo, const long *hi, const double *levels,
+                   const long *derivative, const double *white, const double *step, const double *spread,
+                   double gamma, double roughness, double floor_, double *out) {
+    for (long j = 0; j < n; j++) {
+        double speed = fabs(fits[j * 5 + 1]);  /* level 0's first derivative */
+        double low_run = -INFINITY, high_run = INFINITY;
+        long chosen = -1;
+        int meets[64];
+        for (long l = valid - 1; l >= 0; l--) {
+            double *fit = fits + (l * n + j) * 5, cnt = (double)(hi[l] - lo[l]);
+            double quantisation = step[j] * step[j] / 12.0, travel = speed * 2.0 * levels[l];
+            double crossings = step[j] > 0.0 ? travel / step[j] : cnt;
+            double independent = nmin(nmax(crossings, 1.0), nmax(cnt, 1.0));
+            double least = floor_ * fits[j * 5];  /* level 0's value */
+            double effective = nmax(nmax(white[j] * white[j], quantisation * cnt / independent), least * least);
+            double std = sqrt(nmax(fit[3], 0.0) * effective);
+            fit[3] = std;
+            double estimate = derivative[j] == 2 ? fit[2] : fit[1];
+            double low = estimate - gamma * std, high = estimate + gamma * std;
+            low_run = nmax(low_run, low);
+            high_run = nmin(high_run, high);
+            meets[l] = low_run <= high_run;
+        }
+        for (long l = 0; l < valid && chosen < 0; l++) if (meets[l]) chosen = l;
+        if (chosen < 0) chosen = 0;
+        double *fit = fits + (chosen * n + j) * 5;
+        long smallest_level = valid - 1;
+        int strained = (chosen == smallest_level && smallest_level > 0) || white[j] > roughness * spread[j];
+        for (long k = 0; k < 4; k++) out[k * n + j] = fit[k];
+        out[4 * n + j] = strained ? 1.0 : 0.0;
+    }
+}
+
+/* See adaptive_fit in neforward_ros/estimation/adaptive.py. times (count,), values (count, n)
+   row-major; levels, leads (nlevels,) the half-widths (largest first) and their leads; order the
+   polynomial degree and lower a second, lower degree fused with it (see fused in adaptive.py; 0: none),
+   both fitted from the same power sums and noise reading; derivative (n,) 2 or 1. out (5, n): value,
+   first and second derivative, the chosen derivative's standard deviation, strained (1 or 0). Returns
+   0 when done, 1 when the largest window is too small (the caller's function serves), 2 when memory
+   runs out. */
+/* |normalised sixth divided difference| of samples s = 1, 2, 4 ... (strides of them) apart, starting
+   at each sample i of [lo, hi) whose seventh sample is before hi, into pre (strides, hi - lo, n): the
+   very numbers fit_target adds for a window inside [lo, hi), computed once for many targets. */
+static void sixths(const double *times, const double *values, long n, long lo, long hi, long strides,
+                   double *pre) {
+    double weights[7];
+    for (long b = 0, s = 1; b < strides; b++, s *= 2)
+        for (long i = lo; i + 6 * s < hi; i++) {
+            divided_weights(times + i, s, weights);
+            double *row = pre + ((size_t)b * (hi - lo) + (i - lo)) * n;
+            for (long j = 0; j < n; j++) {
+                const double *y = values + i * n + j;
+                double x = weights[0] * y[0];
+                for (long k = 1; k < 7; k++) x = x + weights[k] * y[k * s * n];
+                row[j] = fabs(x);
+            }
+        }
+}
+
+/* adaptive_fit below, with pre (pre_strides, pre_count, n) the sixths of samples [pre_lo, pre_lo +
+   pre_count), covering this target's largest window, or NULL: computed here. */
+static int fit_target(long count, const double *times, const double *values, long n, double target,
+                      long nlevels, const double *levels, const double *leads, long order, long lower,
+                      const long *derivative, double gamma, double roughness, double sixth_gain,
+                      double floor_, double growth, const double *pre, long pre_lo, long pre_count,
+                      long pre_strides, double *out) {
+    long d = order + 1, lo[64], hi[64], valid = 0, valid_low = 0;
+    if (nlevels > 64 || d > 16 || n < 1 || lower < 0 || lower >= order) return 1;
     for (long l = 0; l < nlevels; l++) {
         lo[l] = lower_bound(times, count, (target + leads[l]) - 2.0 * levels[l]);
         hi[l] = upper_bound(times, count, target + leads[l]);
         if (hi[l] - lo[l] >= order + 3 && valid == l) valid = l + 1;
+        if (hi[l] - lo[l] >= lower + 3 && valid_low == l) valid_low = l + 1;
     }
     if (valid == 0) return 1;
-    long width = hi[0] - lo[0];
-    double *scratch = malloc(sizeof(double) * (n + d * n + 5 * (size_t)valid * n + 6 * n));
+    if (lower == 0) valid_low = 0;
+    long width = hi[0] - lo[0], rings = valid > valid_low ? valid : valid_low;
+    double *scratch = malloc(sizeof(double) * (n + d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n));
     if (scratch == NULL) return 2;
-    double *equal = scratch, *moments = equal + n, *fits = moments + d * n;
-    double *white = fits + 5 * (size_t)valid * n, *step = white + n, *spread = step + n;
+    double *equal = scratch, *moments = equal + n, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
+    double *out_low = fits_low + 5 * (size_t)valid_low * n;
+    double *white = out_low + 5 * (size_t)n, *step = white + n, *spread = step + n;
     /* the noise, from the largest window, every column at once (rows are contiguous): the samples'
        deviation, the mean |sixth difference|, the smallest non-zero step */
     const double *window = values + lo[0] * n;
@@ -150,10 +241,16 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
            sixth_differences and noise_of): stride 1 is the white noise; a coloured stride counts
            while they grow at most `growth` times per doubling, once the next one agrees */
         double *previous = spread + n, *candidate = previous + n, *alive = candidate + n, weights[7];
-        for (long s = 1; s == 1 || 6 * s + 8 <= width; s *= 2) {
+        for (long s = 1, b = 0; s == 1 || 6 * s + 8 <= width; s *= 2, b++) {
             long terms = width - 6 * s;
             for (long j = 0; j < n; j++) candidate[j] = 0.0;
+            const double *stored = pre != NULL && b < pre_strides
+                ? pre + ((size_t)b * pre_count + (lo[0] - pre_lo)) * n : NULL;
             for (long i = 0; i < terms; i++) {
+                if (stored != NULL) {  /* the same numbers, added in the same order */
+                    for (long j = 0; j < n; j++) candidate[j] += stored[i * n + j];
+                    continue;
+                }
                 divided_weights(wt + i, s, weights);
                 for (long j = 0; j < n; j++) {
                     const double *y = window + i * n + j;
@@ -174,14 +271,15 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
         }
     }
     for (long j = 0; j < n; j++) if (isinf(step[j]) || width < 8) step[j] = 0.0;
-    /* every valid level's fit, the sums gathered ring by ring from the smallest window outwards */
-    double sums[33], gram[16 * 16], inv[16 * 16], h0 = levels[0];
+    /* every valid level's fit, the sums gathered ring by ring from the smallest window outwards; the
+       lower degree's from the same sums (its normal equations are their leading rows and columns) */
+    double sums[33], h0 = levels[0];
     for (long k = 0; k <= 2 * order; k++) sums[k] = 0.0;
     for (long k = 0; k < d * n; k++) moments[k] = 0.0;
     long inner_lo = 0, inner_hi = 0;
     int status = 0;
-    for (long l = valid - 1; l >= 0; l--) {
-        long ring[2][2] = {{lo[l], l == valid - 1 ? hi[l] : inner_lo}, {l == valid - 1 ? hi[l] : inner_hi, hi[l]}};
+    for (long l = rings - 1; l >= 0; l--) {
+        long ring[2][2] = {{lo[l], l == rings - 1 ? hi[l] : inner_lo}, {l == rings - 1 ? hi[l] : inner_hi, hi[l]}};
         for (long side = 0; side < 2; side++)
             for (long i = ring[side][0]; i < ring[side][1]; i++) {
                 double u = (times[i] - target) / h0, p = 1.0;
@@ -193,71 +291,72 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
                 }
             }
         inner_lo = lo[l]; inner_hi = hi[l];
-        double h = levels[l], r = h0 / h, scale[33];
-        scale[0] = 1.0;
-        for (long k = 1; k <= 2 * order; k++) scale[k] = scale[k - 1] * r;
-        for (long a = 0; a < d; a++)
-            for (long b = 0; b < d; b++) gram[a * d + b] = sums[a + b] * scale[a + b];
-        if (!spd_inverse(gram, d, inv)) { status = 1; break; }
-        for (long j = 0; j < n; j++) {
-            double c[3] = {0.0, 0.0, 0.0};
-            for (long q = 0; q < 3; q++)
-                for (long k = 0; k < d; k++) c[q] += inv[q * d + k] * (moments[k * n + j] * scale[k]);
-            double *fit = fits + (l * n + j) * 5;
-            fit[0] = c[0];
-            fit[1] = c[1] / h;
-            fit[2] = 2.0 * c[2] / (h * h);
-            int second = derivative[j] == 2;
-            double variance = second ? 4.0 * inv[2 * d + 2] / (h * h * h * h) : inv[1 * d + 1] / (h * h);
-            fit[3] = variance;  /* its standard deviation once the speed is known */
+        if (l < valid && !level_fit(sums, moments, n, order, levels[l], h0, derivative, fits + l * n * 5)) {
+            status = 1;
+            break;
+        }
+        if (l < valid_low && !level_fit(sums, moments, n, lower, levels[l], h0, derivative, fits_low + l * n * 5)) {
+            status = 1;
+            break;
         }
     }
     if (status == 0) {
-        for (long j = 0; j < n; j++) {
-            double speed = fabs(fits[j * 5 + 1]);  /* level 0's first derivative */
-            double low_run = -INFINITY, high_run = INFINITY;
-            long chosen = -1;
-            int meets[64];
-            for (long l = valid - 1; l >= 0; l--) {
-                double *fit = fits + (l * n + j) * 5, cnt = (double)(hi[l] - lo[l]);
-                double quantisation = step[j] * step[j] / 12.0, travel = speed * 2.0 * levels[l];
-                double crossings = step[j] > 0.0 ? travel / step[j] : cnt;
-                double independent = nmin(nmax(crossings, 1.0), nmax(cnt, 1.0));
-                double least = floor_ * fits[j * 5];  /* level 0's value */
-                double effective = nmax(nmax(white[j] * white[j], quantisation * cnt / independent), least * least);
-                double std = sqrt(nmax(fit[3], 0.0) * effective);
-                fit[3] = std;
-                double estimate = derivative[j] == 2 ? fit[2] : fit[1];
-                double low = estimate - gamma * std, high = estimate + gamma * std;
-                low_run = nmax(low_run, low);
-                high_run = nmin(high_run, high);
-                meets[l] = low_run <= high_run;
+        choose(fits, valid, n, lo, hi, levels, derivative, white, step, spread, gamma, roughness, floor_, out);
+        if (valid_low > 0) {
+            choose(fits_low, valid_low, n, lo, hi, levels, derivative, white, step, spread, gamma, roughness,
+                   floor_, out_low);
+            for (long j = 0; j < n; j++) {  /* fused: the lower degree where it agrees and is the quieter */
+                long k = derivative[j] == 2 ? 2 : 1;
+                double apart = fabs(out_low[k * n + j] - out[k * n + j]);
+                double std_low = out_low[3 * n + j], std_high = out[3 * n + j];
+                if (apart <= gamma * hypot(std_low, std_high) && std_low <= std_high)
+                    for (long q = 0; q < 5; q++) out[q * n + j] = out_low[q * n + j];
             }
-            for (long l = 0; l < valid && chosen < 0; l++) if (meets[l]) chosen = l;
-            if (chosen < 0) chosen = 0;
-            double *fit = fits + (chosen * n + j) * 5;
-            long smallest_level = valid - 1;
-            int strained = (chosen == smallest_level && smallest_level > 0) || white[j] > roughness * spread[j];
-            out[j] = fit[0];
-            out[n + j] = fit[1];
-            out[2 * n + j] = fit[2];
-            out[3 * n + j] = fit[3];
-            out[4 * n + j] = strained ? 1.0 : 0.0;
         }
     }
     free(scratch);
     return status;
 }
 
+int adaptive_fit(long count, const double *times, const double *values, long n, double target,
+                 long nlevels, const double *levels, const double *leads, long order, long lower,
+                 const long *derivative, double gamma, double roughness, double sixth_gain,
+                 double floor_, double growth, double *out) {
+    return fit_target(count, times, values, n, target, nlevels, levels, leads, order, lower, derivative, gamma,
+                      roughness, sixth_gain, floor_, growth, NULL, 0, 0, 0, out);
+}
+
 /* adaptive_fit at each of ntargets targets over the whole of times, values; derivative (n,); out
-   (ntargets, 5, n); status (ntargets,) each target's return value. */
+   (ntargets, 5, n); status (ntargets,) each target's return value. Neighbouring targets' windows
+   overlap: a block of them takes its sixth differences from one pass (sixths), which is most of
+   each target's work otherwise; the numbers are the same as adaptive_fit's one target at a time. */
 void adaptive_fits(long count, const double *times, const double *values, long n, long ntargets,
                    const double *targets, long nlevels, const double *levels, const double *leads,
-                   long order, const long *derivative, double gamma, double roughness,
+                   long order, long lower, const long *derivative, double gamma, double roughness,
                    double sixth_gain, double floor_, double growth, double *out, int *status) {
-    for (long m = 0; m < ntargets; m++)
-        status[m] = adaptive_fit(count, times, values, n, targets[m], nlevels, levels, leads, order,
-                                 derivative, gamma, roughness, sixth_gain, floor_, growth, out + m * 5 * n);
+    const long block = 256;
+    for (long first = 0; first < ntargets; first += block) {
+        long last = first + block < ntargets ? first + block : ntargets, lo = count, hi = 0, widest = 0;
+        for (long m = first; m < last; m++) {
+            long a = lower_bound(times, count, (targets[m] + leads[0]) - 2.0 * levels[0]);
+            long z = upper_bound(times, count, targets[m] + leads[0]);
+            if (a < lo) lo = a;
+            if (z > hi) hi = z;
+            if (z - a > widest) widest = z - a;
+        }
+        long strides = 0;
+        if (widest >= 8) for (long s = 1; s == 1 || 6 * s + 8 <= widest; s *= 2) strides++;
+        double *pre = NULL;
+        /* targets in order share most of their samples; scattered ones are fitted one at a time */
+        if (strides > 0 && hi - lo <= 4 * (widest + block))
+            pre = malloc(sizeof(double) * (size_t)strides * (size_t)(hi - lo) * (size_t)n);
+        if (pre != NULL) sixths(times, values, n, lo, hi, strides, pre);
+        for (long m = first; m < last; m++)
+            status[m] = fit_target(count, times, values, n, targets[m], nlevels, levels, leads, order, lower,
+                                   derivative, gamma, roughness, sixth_gain, floor_, growth, pre, lo, hi - lo,
+                                   pre == NULL ? 0 : strides, out + m * 5 * n);
+        free(pre);
+    }
 }
 """
 
@@ -319,11 +418,12 @@ class NativeAdaptiveFit:
 
 def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
     double, pointer, long = ctypes.c_double, ctypes.c_void_p, ctypes.c_long
-    library.adaptive_fit.argtypes = [long, pointer, pointer, long, double, long, pointer, pointer, long, pointer,
-                                     double, double, double, double, double, pointer]  # fmt: skip
+    library.adaptive_fit.argtypes = [long, pointer, pointer, long, double, long, pointer, pointer, long, long,
+                                     pointer, double, double, double, double, double, pointer]  # fmt: skip
     library.adaptive_fit.restype = ctypes.c_int
-    library.adaptive_fits.argtypes = [long, pointer, pointer, long, long, pointer, long, pointer, pointer, long,
-                                      pointer, double, double, double, double, double, pointer, pointer]  # fmt: skip
+    library.adaptive_fits.argtypes = [long, pointer, pointer, long, long, pointer, long, pointer, pointer,
+                                      long, long, pointer, double, double, double, double, double, pointer,
+                                      pointer]  # fmt: skip
     library.adaptive_fits.restype = None
     return library
 
@@ -346,11 +446,14 @@ def fit(
     sixth_gain: float,
     floor: float,
     growth: float,
+    lower: int | None = None,
 ) -> tuple[np.ndarray, ...] | None:
     """The C function's value, first and second derivative, standard deviation and strain (n,) each;
-    None where the Python function must serve (too few samples, an order above MAX_ORDER)."""
+    None where the Python function must serve (too few samples, an order above MAX_ORDER). ``lower``:
+    a second degree fused with ``order`` (:func:`neforward_ros.estimation.adaptive.fused`), in the same
+    call."""
     got = fits(library, times, values, np.array([target], dtype=float), half_widths, leads, order, derivative,
-               gamma, roughness, sixth_gain, floor, growth)  # fmt: skip
+               gamma, roughness, sixth_gain, floor, growth, lower)  # fmt: skip
     if got is None or not got[1][0]:
         return None
     out = got[0][0]
@@ -371,11 +474,12 @@ def fits(
     sixth_gain: float,
     floor: float,
     growth: float,
+    lower: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The C function at every target over the whole of ``times, values``: value, first and second
     derivative, standard deviation and strain (M, 5, n), and whether each target was done (M,)
-    (where not, the Python function must serve); None above MAX_ORDER."""
-    if order > MAX_ORDER:
+    (where not, the Python function must serve); None above MAX_ORDER. ``lower``: as for :func:`fit`."""
+    if order > MAX_ORDER or (lower is not None and not 0 < lower < order):
         return None
     times = np.ascontiguousarray(times, dtype=float)
     values = np.ascontiguousarray(values, dtype=float)
@@ -391,8 +495,8 @@ def fits(
         count = part.stop - part.start
         library.adaptive_fits(len(times), times.ctypes.data, values.ctypes.data, n, count,
                               targets[part].ctypes.data, len(half_widths), half_widths.ctypes.data,
-                              leads.ctypes.data, order, derivative.ctypes.data, gamma, roughness, sixth_gain, floor,
-                              growth, out[part].ctypes.data, status[part].ctypes.data)  # fmt: skip
+                              leads.ctypes.data, order, lower or 0, derivative.ctypes.data, gamma, roughness,
+                              sixth_gain, floor, growth, out[part].ctypes.data, status[part].ctypes.data)  # fmt: skip
 
     # Each target is fitted on its own (the C function keeps nothing from one to the next), and a
     # ctypes call releases the GIL: a whole recording's targets are shared among the cores.

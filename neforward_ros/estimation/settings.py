@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from neforward_ros.errors import InputError
 from neforward_ros.estimation import fit
 from neforward_ros.estimation.coverage import Support
-from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW
+from neforward_ros.estimation.fit import DEFAULT_WINDOW, default_lower, default_order
 from neforward_ros.estimation.motion import KalmanSettings
 
 METHODS = ("polyfit", "kalman", "difference")
@@ -30,7 +30,8 @@ class StreamSettings:
             on the motion model of ``kalman``) or ``"difference"`` (numpy.gradient twice; a baseline).
         window: polyfit: full width of the local fit, s. kalman: the stretch of recent samples an
             estimate needs before its stamp (its warm-up), s.
-        order: polynomial degree (polyfit).
+        order: polynomial degree (polyfit); None: :attr:`degree`'s default, 6 fused with 4 for adaptive
+            windows reaching past the estimate (a fixed lag), 4 for a fixed window or a causal fit.
         adaptive: polyfit: each joint's window chosen per estimate, up to ``window``, by the
             intersection-of-confidence-intervals rule (:mod:`.adaptive`); False: always ``window``.
         mode: ``"causal"``: each estimate refers to the newest sample (lowest latency).
@@ -49,7 +50,7 @@ class StreamSettings:
 
     method: str = "polyfit"
     window: float = DEFAULT_WINDOW
-    order: int = DEFAULT_ORDER
+    order: int | None = None
     adaptive: bool = True
     mode: str = "fixed_lag"
     lag: float | None = None
@@ -60,7 +61,7 @@ class StreamSettings:
     def __post_init__(self) -> None:
         if self.method not in METHODS:
             raise InputError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
-        fit.check_settings("polyfit", self.window, self.order)
+        fit.check_settings("polyfit", self.window, self.degree)
         if self.mode not in MODES:
             raise InputError(f"unknown mode {self.mode!r}; choose one of {', '.join(MODES)}")
         if self.velocity_source not in VELOCITY_SOURCES:
@@ -73,6 +74,20 @@ class StreamSettings:
             raise InputError(f"max_gap must be a positive number of seconds, got {self.max_gap!r}")
         if not isinstance(self.kalman, KalmanSettings):
             raise InputError(f"kalman must be KalmanSettings, got {self.kalman!r}")
+
+    @property
+    def degree(self) -> int:
+        """The polynomial degree of the polyfit: ``order``, or where None the default for the windows
+        (:func:`~neforward_ros.estimation.fit.default_order`)."""
+        if self.order is not None:
+            return self.order
+        return default_order(self.adaptive, self.effective_lag == 0.0)
+
+    @property
+    def lower_degree(self) -> int | None:
+        """The second degree the adaptive fit fuses with :attr:`degree` (the default at a fixed lag), or
+        None (:func:`~neforward_ros.estimation.fit.default_lower`)."""
+        return default_lower(self.order, self.adaptive, self.effective_lag == 0.0)
 
     @property
     def effective_lag(self) -> float:
@@ -95,7 +110,8 @@ class StreamSettings:
             size = (
                 f"windows up to {self.window:g} s, chosen per joint" if self.adaptive else f"window {self.window:g} s"
             )
-            what = f"polyfit ({size}, degree {self.order})"
+            degree = f"degrees {self.lower_degree} and {self.degree}" if self.lower_degree else f"degree {self.degree}"
+            what = f"polyfit ({size}, {degree})"
         else:
             what = f"difference (window {self.window:g} s)"
         lag = self.effective_lag
@@ -110,13 +126,14 @@ class StreamSettings:
     def support(self) -> Support:
         """The samples an estimate needs around its stamp (see :mod:`.coverage`).
 
-        polyfit: its window (ending ``lag`` after the stamp), with at least 2 (order + 1) samples and
-        no stretch longer than window / (order + 1) without one. kalman: ``window`` before the stamp
-        and ``lag`` after, at least :data:`KALMAN_MIN_SAMPLES` samples, no stretch longer than
-        window / 5. difference: the same as kalman, with 5 samples.
+        polyfit: its window (ending ``lag`` after the stamp), with at least 2 (degree + 1) samples and
+        no stretch longer than window / (degree + 1) without one (of two fused degrees, the lower).
+        kalman: ``window`` before the stamp and ``lag`` after, at least :data:`KALMAN_MIN_SAMPLES`
+        samples, no stretch longer than window / 5. difference: the same as kalman, with 5 samples.
         """
         lag = self.effective_lag
         if self.method == "polyfit":
-            return Support(self.window - lag, lag, 2 * (self.order + 1), self.window / (self.order + 1))
+            degree = self.lower_degree or self.degree  # the lower of two fused: the fit that needs fewest
+            return Support(self.window - lag, lag, 2 * (degree + 1), self.window / (degree + 1))
         before = self.window if self.method == "kalman" or self.mode == "causal" else self.window / 2.0
         return Support(before, lag, KALMAN_MIN_SAMPLES if self.method == "kalman" else 5, self.window / 5.0)

@@ -233,7 +233,7 @@ class StreamingEstimator:
         self._targets += 1
         if self._targets % 32 == 0:  # forget old samples now and then
             for group in self._groups:
-                group.drop_before(stamp - self._keep_ns, self.settings.order + 2)
+                group.drop_before(stamp - self._keep_ns, self.settings.degree + 2)
         return out
 
     def _add(self, stamp: int, samples: list[tuple[int, float, float, float]]) -> bool | str:
@@ -416,14 +416,21 @@ class StreamingEstimator:
             elif fitted_velocities:
                 derivative[m:] = 1
             fitted, d1, d2, spread, smallest = adaptive_fit(
-                times, values, target_s, settings.window / 2.0, settings.order, lead_ns / NS, derivative
+                times,
+                values,
+                target_s,
+                settings.window / 2.0,
+                settings.degree,
+                lead_ns / NS,
+                derivative,
+                settings.lower_degree,
             )
             joint_smallest = smallest[:m].copy()
             if fitted_velocities and not exact:  # the acceleration of those joints: their velocities' fit's
                 joint_smallest[by_velocity] = smallest[m:]
             self._watch_windows(group, joint_smallest)
         else:
-            fitted, d1, d2 = fit_window(times, values, target_s, settings.window / 2.0, settings.order)
+            fitted, d1, d2 = fit_window(times, values, target_s, settings.window / 2.0, settings.degree)
         if fitted_velocities and exact:
             return fitted, np.where(by_velocity, fitted, d1), np.where(by_velocity, d1, d2), spread
         velocity, acceleration = d1[:m], d2[:m]

@@ -262,7 +262,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         estimator = StreamSettings(
             method=merged["estimator.method"],
             window=merged["estimator.window"],
-            order=merged["estimator.order"],
+            order=merged["estimator.order"] or None,
             adaptive=merged["estimator.adaptive"],
             mode=merged["estimator.mode"],
             lag=None if lag < 0 else lag,

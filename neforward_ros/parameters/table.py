@@ -12,7 +12,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from neforward_ros.estimation.fit import DEFAULT_ORDER, DEFAULT_WINDOW
+from neforward_ros.estimation.fit import ADAPTIVE_ORDER, DEFAULT_ORDER, DEFAULT_WINDOW
 from neforward_ros.estimation.motion import KalmanSettings
 from neforward_ros.estimation.settings import DEFAULT_KALMAN_LAG, DEFAULT_MAX_GAP
 from neforward_ros.kinematics.effort_model import DEFAULT_STRIBECK_VELOCITY, DEFAULT_VELOCITY_SCALE
@@ -91,7 +91,13 @@ PARAMETERS: tuple[Parameter, ...] = (
         DEFAULT_WINDOW,
         "polyfit: width of the local fit, s. kalman: the samples an estimate needs before its stamp, s.",
     ),
-    Parameter("estimator.order", "int", DEFAULT_ORDER, "Degree of the local polynomial (polyfit)."),
+    Parameter(
+        "estimator.order",
+        "int",
+        0,
+        f"Degree of the local polynomial (polyfit). 0: {ADAPTIVE_ORDER} for adaptive windows at a fixed lag, "
+        f"{DEFAULT_ORDER} for a fixed window or a causal fit.",
+    ),
     Parameter(
         "estimator.adaptive",
         "bool",
