@@ -57,10 +57,8 @@ def test_c_and_numpy_choose_the_same_windows_and_agree_to_rounding() -> None:
     worst = 0.0
     for _ in range(1500):
         t, y, target, h, order, lower, lead, derivative, still = window(rng)
-        want = adaptive.python_adaptive_fit(t, y, target, h, order, lead, derivative)
-        if lower is not None:  # two degrees fused: numpy fits each on its own, C both from one set of sums
-            want = adaptive.fused(want, adaptive.python_adaptive_fit(t, y, target, h, lower, lead, derivative),
-                                  derivative)  # fmt: skip
+        # two degrees fused: numpy fits each on its own, C both from one set of sums
+        want = adaptive.python_adaptive_fit(t, y, target, h, order, lead, derivative, lower)
         got = native_fit.fit(lib, t, y, target, *adaptive._ladder_and_leads(h, lead), order, derivative,
                              adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._GAIN, adaptive.FLOOR,
                              adaptive.GROWTH, lower)  # fmt: skip

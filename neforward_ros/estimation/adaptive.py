@@ -366,10 +366,7 @@ def adaptive_fit(
         )  # fmt: skip
         if got is not None:
             return got
-    high = python_adaptive_fit(times, values, target, h_max, order, lead, derivative)
-    if lower is None:
-        return high
-    return fused(high, python_adaptive_fit(times, values, target, h_max, lower, lead, derivative), derivative)  # type: ignore[return-value]
+    return python_adaptive_fit(times, values, target, h_max, order, lead, derivative, lower)
 
 
 def python_adaptive_fit(
@@ -380,8 +377,12 @@ def python_adaptive_fit(
     order: int,
     lead: float,
     derivative: np.ndarray,
+    lower: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`adaptive_fit` in numpy."""
+    """:func:`adaptive_fit` in numpy (two degrees fused: each fitted on its own)."""
+    if lower is not None:
+        high = python_adaptive_fit(times, values, target, h_max, order, lead, derivative)
+        return fused(high, python_adaptive_fit(times, values, target, h_max, lower, lead, derivative), derivative)  # type: ignore[return-value]
     levels = ladder(h_max)
     leads = np.minimum(lead, levels)
     lo = times.searchsorted(target + leads - 2.0 * levels, side="left")

@@ -15,7 +15,7 @@ import numpy as np
 
 from neforward_ros.errors import InputError
 from neforward_ros.estimation.adaptive import adaptive_fits
-from neforward_ros.estimation.fit import DEFAULT_WINDOW, check_settings, default_lower, default_order, local_polynomial
+from neforward_ros.estimation.fit import DEFAULT_WINDOW, check_settings, degrees, local_polynomial
 from neforward_ros.stamps import relative_seconds
 
 
@@ -38,7 +38,7 @@ def estimate_derivatives(
         window: full width in seconds of the local fit (polyfit). A window holding fewer than
             ``order + 1`` samples is widened to the ``order + 1`` nearest samples.
         order: degree of the local polynomial (polyfit), at least 2; None: 6 fused with 4 for the
-            adaptive fit, 4 for the fixed window (:func:`~neforward_ros.estimation.fit.default_order`).
+            adaptive fit, 4 for the fixed window (:func:`~neforward_ros.estimation.fit.degrees`).
         wrap: per column, True for a continuous joint whose positions wrap at +-pi; those
             columns are unwrapped before differentiating.
         adaptive: polyfit: each column's window chosen per sample, up to ``window``, by the
@@ -59,8 +59,7 @@ def estimate_derivatives(
         positions = positions[:, None]
     if positions.ndim != 2 or positions.shape[0] != seconds.shape[0]:
         raise InputError(f"q has shape {np.shape(q)}; expected ({len(seconds)},) or ({len(seconds)}, n) to match t")
-    lower = default_lower(order, adaptive, causal=False)
-    order = default_order(adaptive, causal=False) if order is None else order
+    order, lower = degrees(order, adaptive, causal=False)
     check_settings(method, window, order)
     if len(seconds) < 3:
         raise InputError(f"need at least 3 samples to estimate accelerations, got {len(seconds)}")
@@ -124,8 +123,7 @@ def estimate_at(
     Returns:
         three (M, m) arrays (four with ``spread``).
     """
-    lower = default_lower(order, adaptive, causal=False)
-    order = default_order(adaptive, causal=False) if order is None else order
+    order, lower = degrees(order, adaptive, causal=False)
     check_settings(method, window, order)
     index = np.minimum(np.searchsorted(t, targets), len(t) - 1)
     exact = t[index] == targets

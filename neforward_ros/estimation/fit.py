@@ -26,16 +26,16 @@ keep windows about twice as wide on fast motions as degree 4 does for the same b
 motions keep degree 4's quieter fit over the largest window."""
 
 
-def default_order(adaptive: bool, causal: bool) -> int:
-    """The polynomial degree a polyfit setting takes when none is given: :data:`ADAPTIVE_ORDER` for
-    adaptive windows that reach past the estimate, :data:`DEFAULT_ORDER` otherwise."""
-    return ADAPTIVE_ORDER if adaptive and not causal else DEFAULT_ORDER
-
-
-def default_lower(order: int | None, adaptive: bool, causal: bool) -> int | None:
-    """The second degree the adaptive fit fuses with :func:`default_order`'s when no degree is given
-    (:data:`DEFAULT_ORDER`), or None: a degree given, a fixed window, or a causal fit."""
-    return DEFAULT_ORDER if order is None and adaptive and not causal else None
+def degrees(order: int | None, adaptive: bool, causal: bool) -> tuple[int, int | None]:
+    """The polynomial degree a polyfit setting fits, and the second, lower degree fused with it (or
+    None). ``order`` given: that degree alone. None: :data:`ADAPTIVE_ORDER` fused with
+    :data:`DEFAULT_ORDER` for adaptive windows that reach past the estimate; :data:`DEFAULT_ORDER`
+    alone for a fixed window or a causal fit."""
+    if order is not None:
+        return order, None
+    if adaptive and not causal:
+        return ADAPTIVE_ORDER, DEFAULT_ORDER
+    return DEFAULT_ORDER, None
 
 
 _CHUNK = 2048  # targets per vectorised block: bounds memory (about 2 order + 1 + n numbers per target and

@@ -176,6 +176,14 @@ static void choose(double *fits, long valid, long n, const long *lo, const long 
    first and second derivative, the chosen derivative's standard deviation, strained (1 or 0). Returns
    0 when done, 1 when the largest window is too small (the caller's function serves), 2 when memory
    runs out. */
+/* |the combination of y[0], y[s n], ..., y[6 s n] with the weights w|: one column's normalised sixth
+   divided difference (the single expression both callers use, so that they add the very same numbers) */
+static double sixth(const double *y, const double *w, long s, long n) {
+    double x = w[0] * y[0];
+    for (long k = 1; k < 7; k++) x = x + w[k] * y[k * s * n];
+    return fabs(x);
+}
+
 /* |normalised sixth divided difference| of samples s = 1, 2, 4 ... (strides of them) apart, starting
    at each sample i of [lo, hi) whose seventh sample is before hi, into pre (strides, hi - lo, n): the
    very numbers fit_target adds for a window inside [lo, hi), computed once for many targets. */
@@ -186,12 +194,7 @@ static void sixths(const double *times, const double *values, long n, long lo, l
         for (long i = lo; i + 6 * s < hi; i++) {
             divided_weights(times + i, s, weights);
             double *row = pre + ((size_t)b * (hi - lo) + (i - lo)) * n;
-            for (long j = 0; j < n; j++) {
-                const double *y = values + i * n + j;
-                double x = weights[0] * y[0];
-                for (long k = 1; k < 7; k++) x = x + weights[k] * y[k * s * n];
-                row[j] = fabs(x);
-            }
+            for (long j = 0; j < n; j++) row[j] = sixth(values + i * n + j, weights, s, n);
         }
 }
 
@@ -246,18 +249,11 @@ static int fit_target(long count, const double *times, const double *values, lon
             for (long j = 0; j < n; j++) candidate[j] = 0.0;
             const double *stored = pre != NULL && b < pre_strides
                 ? pre + ((size_t)b * pre_count + (lo[0] - pre_lo)) * n : NULL;
-            for (long i = 0; i < terms; i++) {
-                if (stored != NULL) {  /* the same numbers, added in the same order */
-                    for (long j = 0; j < n; j++) candidate[j] += stored[i * n + j];
-                    continue;
-                }
+            if (stored != NULL)  /* the same numbers, added in the same order */
+                for (long i = 0; i < terms; i++) for (long j = 0; j < n; j++) candidate[j] += stored[i * n + j];
+            else for (long i = 0; i < terms; i++) {
                 divided_weights(wt + i, s, weights);
-                for (long j = 0; j < n; j++) {
-                    const double *y = window + i * n + j;
-                    double x = weights[0] * y[0];
-                    for (long k = 1; k < 7; k++) x = x + weights[k] * y[k * s * n];
-                    candidate[j] += fabs(x);
-                }
+                for (long j = 0; j < n; j++) candidate[j] += sixth(window + i * n + j, weights, s, n);
             }
             for (long j = 0; j < n; j++) {
                 double noise = candidate[j] / ((double)terms * sixth_gain);

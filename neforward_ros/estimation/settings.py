@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from neforward_ros.errors import InputError
 from neforward_ros.estimation import fit
 from neforward_ros.estimation.coverage import Support
-from neforward_ros.estimation.fit import DEFAULT_WINDOW, default_lower, default_order
+from neforward_ros.estimation.fit import DEFAULT_WINDOW, degrees
 from neforward_ros.estimation.motion import KalmanSettings
 
 METHODS = ("polyfit", "kalman", "difference")
@@ -78,16 +78,14 @@ class StreamSettings:
     @property
     def degree(self) -> int:
         """The polynomial degree of the polyfit: ``order``, or where None the default for the windows
-        (:func:`~neforward_ros.estimation.fit.default_order`)."""
-        if self.order is not None:
-            return self.order
-        return default_order(self.adaptive, self.effective_lag == 0.0)
+        (:func:`~neforward_ros.estimation.fit.degrees`)."""
+        return degrees(self.order, self.adaptive, self.effective_lag == 0.0)[0]
 
     @property
     def lower_degree(self) -> int | None:
         """The second degree the adaptive fit fuses with :attr:`degree` (the default at a fixed lag), or
-        None (:func:`~neforward_ros.estimation.fit.default_lower`)."""
-        return default_lower(self.order, self.adaptive, self.effective_lag == 0.0)
+        None (:func:`~neforward_ros.estimation.fit.degrees`)."""
+        return degrees(self.order, self.adaptive, self.effective_lag == 0.0)[1]
 
     @property
     def effective_lag(self) -> float:
