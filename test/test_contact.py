@@ -109,7 +109,7 @@ def check_observer_is_a_first_order_filter_of_the_truth(armature: np.ndarray | N
     stamps = simulated.stamps
     raw = RawStates(stamps, simulated.q, simulated.qd, simulated.effort, np.zeros(len(stamps), bool))
     effort = effort_of(replace(setup.joints, armature=armature if told else None))
-    got, _ = observe(model, raw, effort, ObserverState(np.full(7, gain), (0.0, 0.0, -9.81)))
+    got, *_ = observe(model, raw, effort, ObserverState(np.full(7, gain), (0.0, 0.0, -9.81)))
     t = (simulated.stamps - simulated.stamps[0]) / 1e9
     expected = first_order(simulated.true_external, t, gain)
     scale = np.abs(simulated.true_external).max()
@@ -119,6 +119,51 @@ def check_observer_is_a_first_order_filter_of_the_truth(armature: np.ndarray | N
 
 def test_observer_is_a_first_order_filter_of_the_true_external_torque() -> None:
     check_observer_is_a_first_order_filter_of_the_truth()
+
+
+def test_two_speed_observer_is_the_slow_filter_where_the_two_agree_and_the_fast_one_elsewhere() -> None:
+    """external_torques.slow_gain: each joint's output is the slow observer's where it agrees with the
+    fast one within the dead zone, else the fast one's; each against its first-order filter of the
+    truth (integrated without the observer's formula), away from the dead zone's edge."""
+    setup = arm(SEED, velocity_noise=0.0, effort_noise=0.0, encoder_bits=48, amplitude=1.0, frequency=0.15,
+                pushes=sim.standard_pushes(1.0, 1.5)[:2])  # fmt: skip
+    simulated = sim.simulate(setup, 4.0)
+    model = load_model(setup.urdf)
+    stamps = simulated.stamps
+    raw = RawStates(stamps, simulated.q, simulated.qd, simulated.effort, np.zeros(len(stamps), bool))
+    scale = np.abs(simulated.true_external).max()
+    zone = 0.1 * scale
+    state = ObserverState(np.full(7, 250.0), (0.0, 0.0, -9.81), 0.0, 100.0, np.full(7, zone))
+    got, *_ = observe(model, raw, effort_of(setup.joints), state)
+    t = (stamps - stamps[0]) / 1e9
+    fast = first_order(simulated.true_external, t, 250.0)
+    slow = first_order(simulated.true_external, t, 100.0)
+    apart = np.abs(fast - slow)
+    expected = np.where(apart > zone, fast, slow)
+    clear = np.abs(apart - zone) > 0.02 * scale
+    clear[0] = False
+    assert np.abs(got - expected)[clear].max() < 0.02 * scale
+    # both ways taken: at the pushes' starts and ends the fast one, elsewhere the slow one
+    assert (clear & (apart > zone)).sum() > 20 and (clear & (apart < zone)).sum() > 1000
+
+
+def test_two_speed_observer_is_as_quiet_as_the_slow_one_in_free_motion() -> None:
+    """Velocity noise enters an observer K |M| times over: with the slow observer and a dead zone of a
+    few times the two's difference, a free motion's output is about as quiet as the slow observer's."""
+    setup = arm(SEED, velocity_noise=0.02, effort_noise=0.0, amplitude=1.0, frequency=0.15)
+    simulated = sim.simulate(setup, 4.0)
+    model = load_model(setup.urdf)
+    stamps = simulated.stamps
+    raw = RawStates(stamps, simulated.q, simulated.qd, simulated.effort, np.zeros(len(stamps), bool))
+    effort = effort_of(setup.joints)
+    gravity = (0.0, 0.0, -9.81)
+    fast, *_ = observe(model, raw, effort, ObserverState(np.full(7, 250.0), gravity))
+    slow, *_ = observe(model, raw, effort, ObserverState(np.full(7, 100.0), gravity))
+    zones = 3.0 * np.percentile(np.abs(fast - slow)[1:], 99.0, axis=0)
+    both, *_ = observe(model, raw, effort, ObserverState(np.full(7, 250.0), gravity, 0.0, 100.0, zones))
+    rms = [np.sqrt(np.mean(x[1:] ** 2, axis=0)) for x in (fast, slow, both)]
+    assert np.all(rms[2] <= 1.15 * rms[1]), rms
+    assert np.all(rms[2] <= 0.8 * rms[0]), rms
 
 
 def test_observer_with_the_rotors_inertia_is_a_first_order_filter_of_the_truth() -> None:

@@ -112,6 +112,11 @@ def test_bundled_params_file_applies_in_any_namespace() -> None:
         ({"accel_links": "panda_hand"}, "accel_links must be string\\[\\]"),
         ({"qos_depth": 0}, "qos_depth must be at least 1"),
         ({"publish_markers": 1}, "publish_markers must be bool"),
+        (
+            {"external_torques.joint_names": ["a", "b"], "external_torques.dead_zones": [1.0]},
+            "external_torques.joint_names and external_torques.dead_zones must have the same length",
+        ),
+        ({"external_torques.slow_gain": -1.0}, "slow_gain \\(1/s\\) and external_torques.dead_zones must be >= 0"),
     ],
 )
 def test_bad_values_name_the_parameter(values, text) -> None:

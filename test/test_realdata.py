@@ -77,7 +77,9 @@ def test_panda_last_40_percent_gives_external_torques_at_every_block_edge(tmp_pa
 
 def test_panda_calibrated_on_the_first_60_percent_sees_no_contact_in_the_rest(tmp_path, capsys):
     """Issue 27: calibrate (default options) on the first 60 %, then ``bag --params`` on exactly the
-    last 40 % of the free motion: external torques nearly everywhere, and no contact."""
+    last 40 % of the free motion: external torques nearly everywhere, relative to the measured torque
+    at most the figures of the model Gaz et al. identified from this very data on every joint, and no
+    contact."""
     urdf = str(bench_realdata.panda_urdf())
     count = bench_calibration.split(bench_realdata.RECORDING, tmp_path / "first", tmp_path / "last")
     params = str(tmp_path / "panda.yaml")
@@ -86,8 +88,7 @@ def test_panda_calibrated_on_the_first_60_percent_sees_no_contact_in_the_rest(tm
                  capsys)  # fmt: skip
     relative, written = bench_calibration.external_relative(tmp_path / "last", tmp_path / "out")
     assert written >= 0.95 * count
-    # the free motion's external torque is a small part of the measured torque on every joint
-    assert np.all(relative < 0.5), relative.round(3)
+    assert np.all(relative <= np.array(bench_calibration.GAZ)), relative.round(3)
     assert bench_calibration.contacts(report) == []
 
 

@@ -19,6 +19,10 @@ thresholds out, as a params file the node and the bag tool take as it is.
    the observer's velocity cutoff is chosen among :data:`CUTOFFS` on the free motion: the highest
    (the least lag) whose external torques have a mean square within :data:`CUTOFF_SLACK` of the
    least, velocity noise against the lag of the momentum's rate measured on the robot itself.
+   Unless given, a second, slower observer (:data:`SLOWER`) with a dead zone per joint, on the joints
+   where it is :data:`QUIETER` in the free motion (:func:`_two_speeds`;
+   :mod:`neforward_ros.computation.observer`): the published external torques'. The thresholds are
+   measured on the fast observer's own estimate, on which the node decides contact.
 """
 
 from __future__ import annotations
@@ -62,6 +66,46 @@ CUTOFFS = (0.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 """Hz: the observer's velocity cutoffs tried (0: no filter)."""
 CUTOFF_SLACK = 2.5
 """The velocity cutoff taken: the highest whose free-motion mean square is within this factor of the least."""
+SLOWER = 2.5
+"""The slow observer's gain is the observer's over this (:mod:`neforward_ros.computation.observer`)."""
+DEAD_ZONE = 3.0
+"""Each joint's dead zone: this many times the 99th percentile of the two observers' difference in the
+free motion."""
+QUIETER = 2.0 / 3.0
+"""The slow observer serves the joints whose free-motion mean square it brings to at most this fraction
+of the observer's: where the velocities' noise, which it filters, is much of what the model leaves
+(the Franka Panda's first four joints: 0.46-0.53), not where the model's own error is (the UR10e's
+joints: 0.77-0.96, where a slower output only draws a drive's ringing out into a contact)."""
+
+
+def _two_speeds(
+    fitted: dict[str, Any], fast: np.ndarray, names: Sequence[str], external: Callable[[dict[str, Any]], np.ndarray]
+) -> dict[str, Any]:
+    """The slow observer's parameters: its gain (the observer's over :data:`SLOWER`) and each joint's
+    dead zone, :data:`DEAD_ZONE` x the 99th percentile of |fast - slow| over this free motion, where
+    the slow one is :data:`QUIETER` there, else 0 (the fast one's output); none where no joint is
+    (``fast``: the observer's external torques (T, n); ``external``: those of given parameters)."""
+    settings = node_settings(fitted)
+    gains = [settings.observer_gains.get(n, settings.observer_gain) for n in names]
+    slow_gain = settings.observer_gain / SLOWER
+    slow = external({**fitted, "external_torques.gain": slow_gain, "external_torques.joint_names": [],
+                     "external_torques.gains": [], "external_torques.dead_zones": []})  # fmt: skip
+    zones = []
+    for fast_j, slow_j in zip(fast.T, slow.T, strict=True):
+        known = np.isfinite(fast_j) & np.isfinite(slow_j)
+        quieter = known.any() and np.mean(slow_j[known] ** 2) <= QUIETER * np.mean(fast_j[known] ** 2)
+        apart = np.abs(fast_j - slow_j)[known]
+        zones.append(float(f"{DEAD_ZONE * np.percentile(apart, 99.0):.4g}") if quieter else 0.0)
+    if not any(zones):
+        return {}
+    out: dict[str, Any] = {
+        "external_torques.slow_gain": float(slow_gain),
+        "external_torques.joint_names": list(names),
+        "external_torques.dead_zones": zones,
+    }
+    if settings.observer_gains:  # the joints' own gains, for every joint now named
+        out["external_torques.gains"] = [float(g) for g in gains]
+    return out
 
 
 @dataclass
@@ -241,10 +285,17 @@ def calibrate(
             cutoff = 0.0
         fitted["external_torques.velocity_cutoff"] = cutoff
         free = trials[cutoff][1]
-    after = free.external
+    after = free.external  # what ~/external_torques publishes in this free motion
+    if method == "observer" and "external_torques.slow_gain" not in values:
+        # contact stays decided on the fast observer's estimate, free's (see the observer's module)
+        speeds = _two_speeds(fitted, free.external, names, lambda trial: _external(
+            recordings, _options(trial, urdf, joint_states_topic), raws).external)  # fmt: skip
+        if speeds:
+            fitted.update(speeds)
+            after = _external(recordings, _options(fitted, urdf, joint_states_topic), raws).external
     fitted_options = _options(fitted, urdf, joint_states_topic)
     progress("thresholds", 1.0)
-    thresholds = robust_thresholds(after, free.velocity, measured)
+    thresholds = robust_thresholds(free.external, free.velocity, measured)
     fitted["contact.joint_names"] = [name for name, ok in zip(names, measured, strict=True) if ok]
     fitted["contact.thresholds"] = [float(f"{x:.4g}") for x, ok in zip(thresholds, measured, strict=True) if ok]
     fitted["contact.release"] = RELEASE
@@ -256,7 +307,7 @@ def calibrate(
         gains = np.array([fitted_options.settings.observer_gains.get(n, fitted_options.settings.observer_gain)
                           for n in names])  # fmt: skip
         least = max(0.001, float(np.ceil(1000.0 / float(np.min(gains)))) / 1000.0)
-    outliers = excursions(after, free.stamps, free.recording, thresholds)
+    outliers = excursions(free.external, free.stamps, free.recording, thresholds)
     steps = np.diff(free.stamps)[np.diff(free.recording) == 0]
     interval = float(np.median(steps[steps > 0])) / 1e9 if (steps > 0).any() else 0.0
     debounce = debounce_over(outliers, interval, max(least, DEBOUNCE_SAMPLES * interval))

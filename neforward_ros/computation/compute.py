@@ -99,7 +99,8 @@ class ComputeState:
         observer, method = None, "difference"
         if observer_wanted(settings):
             gains = np.array([settings.observer_gains.get(n, settings.observer_gain) for n in names])
-            observer = ObserverState(gains, settings.gravity, settings.velocity_cutoff)
+            zones = np.array([settings.dead_zones.get(n, 0.0) for n in names])
+            observer = ObserverState(gains, settings.gravity, settings.velocity_cutoff, settings.slow_gain, zones)
             method = "observer" if settings.external_method == "observer" else None
         return cls(hold_vector(names, settings.hold_positions), effort, contact, observer, method, throttled)
 
@@ -228,19 +229,19 @@ def observe_raw(model: RobotModel, settings: NodeSettings, raw: RawStates, state
     the contact state and the contact wrench; None when the observer does not give them."""
     if state.observer is None or state.method != "observer":
         return None
-    external, filtered = observe(model, raw, state.effort, state.observer)
+    external, filtered, fast = observe(model, raw, state.effort, state.observer)
     still = state.effort.still(filtered)
     contact = None
-    if state.contact is not None:
+    if state.contact is not None:  # on the fast observer's own estimate (see the observer's module)
         slack = settings.contact_static_friction * state.effort.static_friction(filtered)
         if raw.single:
-            if np.isfinite(external).any():
-                contact = state.contact.update(raw.stamps, external, slack, bool(still))
+            if np.isfinite(fast).any():
+                contact = state.contact.update(raw.stamps, fast, slack, bool(still))
             else:
                 state.contact.unseen()
         else:
-            usable = np.isfinite(external).any(axis=-1)
-            contact = state.contact.update_many(raw.stamps, external, usable, slack, still)
+            usable = np.isfinite(fast).any(axis=-1)
+            contact = state.contact.update_many(raw.stamps, fast, usable, slack, still)
     wrench = None
     if settings.contact_link and settings.contact_link in model.link_index:
         wrench = wrench_at_link(model, raw.q, external, settings.contact_link)

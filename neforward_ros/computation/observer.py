@@ -25,6 +25,22 @@ costs is the momentum's rate lagging by about 1 / (2 pi cutoff): an error of abo
 d^2p/dt^2 / (2 pi cutoff), small for smooth motion (``neforward calibrate`` picks the cutoff that
 leaves the least external torque in a free motion).
 
+**Two speeds** (``external_torques.slow_gain``, which ``neforward calibrate`` sets): a gain high
+enough to show a push within milliseconds lets the velocities' noise through K |M| times over (a
+real arm's, above 20 Hz, more than its model error: the Franka Panda's). A second observer with a
+lower gain K_s runs on the same inputs, and each joint's output is the slow one's, r_s, while the two
+agree within a dead zone z, and the fast one's, r, where they do not:
+
+    output = r_s where |r - r_s| <= z, else r
+
+In free motion the two differ by noise, under z (the calibration's 3 x the 99th percentile of their
+difference), and the output is the slow one's, with its quiet. At a push's start or end the fast one
+runs ahead of the slow one by more than z within a few of its time constants, and the output is the
+fast one's. Contact is still decided on the fast observer's own estimate, whose speed it needs and
+whose noise its thresholds absorb (:mod:`.contact`; ``neforward calibrate`` measures them on it):
+where the dead zone is most of a threshold, a push's end might not take the two apart by more than
+the dead zone, and the slow one's output would end the contact a time constant late.
+
 It runs on the raw samples as they come (:class:`RawStates`, assembled by
 :mod:`.raw_samples`), not on the estimator's lagged stamps: ~/external_torques and ~/contact leave
 with the newest sample. It restarts (r = 0) at the start of a stream, after a gap longer than max_gap
@@ -99,10 +115,21 @@ class ObserverState:
         gains: (n,) K per joint, 1/s.
         gravity: m/s^2 in the root frame (the root at rest).
         velocity_cutoff: Hz, the velocities' low-pass for the momentum; 0 for none.
+        slow_gain: 1/s, the slow observer's gain (0: none; see the module docstring).
+        dead_zones: (n,) z per joint, N m (N), with a slow observer; None: zeros.
     """
 
-    def __init__(self, gains: np.ndarray, gravity: tuple[float, float, float], velocity_cutoff: float = 0.0) -> None:
+    def __init__(
+        self,
+        gains: np.ndarray,
+        gravity: tuple[float, float, float],
+        velocity_cutoff: float = 0.0,
+        slow_gain: float = 0.0,
+        dead_zones: np.ndarray | None = None,
+    ) -> None:
         self.gains = np.asarray(gains, dtype=float)
+        self.slow_gain = float(slow_gain)
+        self.dead_zones = np.zeros(len(self.gains)) if dead_zones is None else np.asarray(dead_zones, dtype=float)
         self.gravity_force = -np.asarray(gravity, dtype=float)
         self.cutoff = 2.0 * math.pi * velocity_cutoff  # rad/s; 0: no filter
         self.velocity: np.ndarray | None = None  # the filtered velocities at the previous sample
@@ -112,21 +139,24 @@ class ObserverState:
         self.momentum: np.ndarray | None = None
         self.rate: np.ndarray | None = None  # tau_m - tau_f - g + C^T qd at the previous sample
         self.external = np.zeros(len(self.gains))
+        self.slow = np.zeros(len(self.gains))  # the slow observer's estimate
 
     def restart(self) -> None:
-        """Forget the momentum and the estimate (the velocity filter restarts on its own rules)."""
+        """Forget the momentum and the estimates (the velocity filter restarts on its own rules)."""
         self.stamp = None
         self.momentum = None
         self.rate = None
         self.external = np.zeros(len(self.gains))
+        self.slow = np.zeros(len(self.gains))
 
 
 def observe(
     model: RobotModel, raw: RawStates, effort: EffortModel, state: ObserverState
-) -> tuple[np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The external torques at the raw samples' stamps: (n,) or (T, n), N m (N); NaN at a restart and
     while the velocity filter warms up after it, and for joints without a measured effort. Also the
-    velocities as filtered, of the same shape."""
+    velocities as filtered, and the fast observer's own estimates (the external torques themselves
+    without a slow observer), of the same shape."""
     single = raw.single
     q, qd = (np.atleast_2d(x) for x in (raw.q, raw.qd))
     efforts = np.atleast_2d(raw.efforts)
@@ -139,6 +169,7 @@ def observe(
     momentum = momentum + effort.rotor_momentum(filtered)
     rate = effort.motor(efforts) - effort.friction(qd) - gravity + coriolis
     out = np.full((len(stamps), n), np.nan)
+    fast = out.copy() if state.slow_gain else out
     gains = state.gains
     for k, stamp in enumerate(stamps):
         if restarts[k] or state.stamp is None or stamp <= state.stamp:
@@ -150,12 +181,20 @@ def observe(
             assert state.momentum is not None and state.rate is not None
             step = 0.5 * (rate[k] + state.rate) - (momentum[k] - state.momentum) / dt
             state.external = a * state.external + (1.0 - a) * step
+            shown = state.external
+            if state.slow_gain:
+                b = math.exp(-state.slow_gain * dt)
+                state.slow = b * state.slow + (1.0 - b) * step
+                shown = np.where(np.abs(state.external - state.slow) > state.dead_zones, state.external, state.slow)
             if stamp >= state.quiet_until:
-                out[k] = state.external
+                out[k] = shown
+                fast[k] = state.external
         state.stamp, state.momentum, state.rate = stamp, momentum[k], rate[k]
         if not np.isfinite(state.external).all():  # a joint without an effort: NaN there, the others go on
             state.external = np.where(np.isfinite(state.external), state.external, 0.0)
-    return (out[0], filtered[0]) if single else (out, filtered)
+        if not np.isfinite(state.slow).all():
+            state.slow = np.where(np.isfinite(state.slow), state.slow, 0.0)
+    return (out[0], filtered[0], fast[0]) if single else (out, filtered, fast)
 
 
 def _filtered(qd: np.ndarray, stamps: list[int], restarts: list[bool], state: ObserverState) -> np.ndarray:

@@ -50,6 +50,8 @@ class NodeSettings:
             :class:`neforward_ros.kinematics.effort_model.EffortModel`).
         external_method: "auto", "observer" or "difference".
         observer_gain: 1/s; observer_gains: joint name -> its own gain.
+        slow_gain: 1/s, the second, slower observer's gain (0: none); dead_zones: joint name -> how far,
+            N m (N), the observer may depart from the slow one before it shows (others 0).
         velocity_cutoff: Hz, the observer's velocity low-pass (0: none).
         payload: (link, mass kg, centre of mass in the link frame m), or None.
         inertials: per link (name, mass kg, centre of mass m, inertia about it (6) kg m^2) replacing
@@ -91,6 +93,8 @@ class NodeSettings:
     external_method: str = "auto"
     observer_gain: float = DEFAULT_OBSERVER_GAIN
     observer_gains: Mapping[str, float] = field(default_factory=dict)
+    slow_gain: float = 0.0
+    dead_zones: Mapping[str, float] = field(default_factory=dict)
     velocity_cutoff: float = DEFAULT_VELOCITY_CUTOFF
     payload: tuple[str, float, tuple[float, float, float]] | None = None
     inertials: tuple[tuple[str, float, tuple[float, ...], tuple[float, ...]], ...] = ()
@@ -231,9 +235,14 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
             raise InputError("parameters payload.mass (kg, >= 0) and payload.com (x, y, z in m) describe the payload")
         payload = (merged["payload.link"], merged["payload.mass"], (float(com[0]), float(com[1]), float(com[2])))
     inertials = _inertials(merged)
-    observer_gains = _per_joint(merged, "external_torques.joint_names", "external_torques.gains")
+    observer_gains = _per_joint(
+        merged, "external_torques.joint_names", "external_torques.gains", default=merged["external_torques.gain"]
+    )
     if not merged["external_torques.gain"] > 0.0 or any(not v > 0.0 for v in observer_gains.values()):
         raise InputError("parameters external_torques.gain and external_torques.gains must be positive (1/s)")
+    dead_zones = _per_joint(merged, "external_torques.joint_names", "external_torques.dead_zones", default=0.0)
+    if not merged["external_torques.slow_gain"] >= 0.0 or any(not v >= 0.0 for v in dead_zones.values()):
+        raise InputError("parameters external_torques.slow_gain (1/s) and external_torques.dead_zones must be >= 0")
     if not merged["external_torques.velocity_cutoff"] >= 0.0:
         raise InputError("parameter external_torques.velocity_cutoff must be at least 0 Hz")
     if any(not v > 0.0 for v in contact_thresholds.values()):
@@ -291,6 +300,8 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         external_method=merged["external_torques.method"],
         observer_gain=merged["external_torques.gain"],
         observer_gains=observer_gains,
+        slow_gain=merged["external_torques.slow_gain"],
+        dead_zones=dead_zones,
         velocity_cutoff=merged["external_torques.velocity_cutoff"],
         wrench_links=tuple(merged["wrench_links"]),
         contact_thresholds=contact_thresholds,

@@ -215,8 +215,34 @@ PARAMETERS: tuple[Parameter, ...] = (
         "observer: Hz, the first-order low-pass of the velocities its momentum is computed from (the torques "
         "are not filtered); 0: none.",
     ),
-    Parameter("external_torques.joint_names", "string[]", [], "observer: joints with a gain of their own."),
-    Parameter("external_torques.gains", "double[]", [], "observer: their gains, 1/s, in that order."),
+    Parameter(
+        "external_torques.slow_gain",
+        "double",
+        0.0,
+        "observer: a second observer's gain, 1/s, below external_torques.gain (0: none). Then each joint's "
+        "external torque is the slow observer's where the two agree within its dead zone, else the fast one's: the "
+        "fast one's speed at a push's start and end, the slow one's quiet in free motion (neforward calibrate sets "
+        "it).",
+    ),
+    Parameter(
+        "external_torques.joint_names",
+        "string[]",
+        [],
+        "observer: joints with a gain or a dead zone of their own.",
+    ),
+    Parameter(
+        "external_torques.gains",
+        "double[]",
+        [],
+        "observer: their gains, 1/s, in that order; empty: external_torques.gain each.",
+    ),
+    Parameter(
+        "external_torques.dead_zones",
+        "double[]",
+        [],
+        "observer: their dead zones, N m (N), in that order (with a slow_gain); empty: 0 each (the fast observer's "
+        "output).",
+    ),
     Parameter(
         "payload.link",
         "string",
