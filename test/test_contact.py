@@ -319,9 +319,13 @@ def test_bag_with_the_calibration_detects_pushes_within_30_ms(recordings, calibr
 
 def test_node_gives_the_bag_tools_observer_numbers(recordings, calibrated, tmp_path) -> None:
     """The node (message by message, through the pipeline) and the bag tool (a batch) on the same
-    joint states: the same external torques and contact, stamp by stamp."""
+    joint states: the same external torques and contact, stamp by stamp; with the observer at two
+    speeds (dead zones of 1 N m: both observers' values are published)."""
     values = {**load_params_file(calibrated["params"]), "contact.link": "link7"}
     pushed = recordings["pushed"]
+    arm_joints = [name for name in pushed.names if name in load_model(arm_urdf()).joint_names]
+    values.update({"external_torques.slow_gain": 100.0, "external_torques.joint_names": arm_joints,
+                   "external_torques.gains": [], "external_torques.dead_zones": [1.0] * len(arm_joints)})  # fmt: skip
     count = 4000  # 8 s: the first push and its end
     pipeline = Pipeline(node_settings({**values, "robot_description": arm_urdf().read_text()}), log=LogRecorder())
     live: dict[int, tuple] = {}
