@@ -83,7 +83,8 @@ def test_panda_calibrated_on_the_first_60_percent_sees_no_contact_in_the_rest(tm
     urdf = str(bench_realdata.panda_urdf())
     count = bench_calibration.split(bench_realdata.RECORDING, tmp_path / "first", tmp_path / "last")
     params = str(tmp_path / "panda.yaml")
-    run(["calibrate", str(tmp_path / "first"), "--urdf", urdf, "-o", params], capsys)
+    calibrated = run(["calibrate", str(tmp_path / "first"), "--urdf", urdf, "-o", params], capsys)
+    assert "observer at two speeds" in calibrated  # the velocities' noise dominates this arm's free motion
     report = run(["bag", str(tmp_path / "last"), "--urdf", urdf, "--params", params, "-o", str(tmp_path / "out")],
                  capsys)  # fmt: skip
     relative, written = bench_calibration.external_relative(tmp_path / "last", tmp_path / "out")

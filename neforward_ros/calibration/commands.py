@@ -137,6 +137,15 @@ def describe(found: Calibration, output: Path) -> str:
             f"rest thresholds (the departure from a still arm's baseline, {MARGIN:g} x its {100 * QUANTILE:g}th "
             f"percentile where these recordings hold still): {', '.join(rest)}"
         )
+    slow_gain = found.parameters.get("external_torques.slow_gain", 0.0)
+    if slow_gain and "external_torques.dead_zones" in found.parameters:
+        zones = zip(found.parameters["external_torques.joint_names"], found.parameters["external_torques.dead_zones"],
+                    strict=True)  # fmt: skip
+        rows.append(
+            f"observer at two speeds (the velocities' noise is much of the external torque; contact stays on the "
+            f"fast one): a slow one at {slow_gain:g} /s, whose output is published where the two agree within "
+            "these dead zones: " + ", ".join(f"{n} {z:.3g}" for n, z in zones if z > 0)
+        )
     if found.identified is not None and found.identified.links:
         ident = found.identified
         told = int(ident.told.sum())
