@@ -286,8 +286,12 @@ def calibrate(
         fitted["external_torques.velocity_cutoff"] = cutoff
         free = trials[cutoff][1]
     after = free.external  # what ~/external_torques publishes in this free motion
-    if method == "observer" and "external_torques.slow_gain" not in values:
-        # contact stays decided on the fast observer's estimate, free's (see the observer's module)
+    if method == "observer" and fitted.get("external_torques.slow_gain"):
+        # given (a params file of an earlier calibration): contact is decided on the fast observer's
+        # own estimate (see the observer's module), which the thresholds are measured on
+        fast = {**fitted, "external_torques.slow_gain": 0.0}
+        free = _external(recordings, _options(fast, urdf, joint_states_topic), raws)
+    elif method == "observer" and "external_torques.slow_gain" not in values:
         speeds = _two_speeds(fitted, free.external, names, lambda trial: _external(
             recordings, _options(trial, urdf, joint_states_topic), raws).external)  # fmt: skip
         if speeds:
