@@ -20,6 +20,8 @@ sys.path.insert(0, str(ROOT / "bench"))
 import bench_calibration
 import bench_realdata
 
+from neforward_ros.parameters.files import load_params_file
+
 pytestmark = pytest.mark.skipif(
     not bench_realdata.RECORDING.is_dir(),
     reason=f"{bench_realdata.REALDATA} is absent (the real recordings are not part of the repository)",
@@ -91,6 +93,13 @@ def test_panda_calibrated_on_the_first_60_percent_sees_no_contact_in_the_rest(tm
     assert written >= 0.95 * count
     assert np.all(relative <= np.array(bench_calibration.GAZ)), relative.round(3)
     assert bench_calibration.contacts(report) == []
+    # Calibrated again with that file given (as for a payload): the slow observer is given, and the
+    # thresholds are still measured on the fast observer's estimate, which contact is decided on.
+    again = str(tmp_path / "again.yaml")
+    run(["calibrate", str(tmp_path / "first"), "--urdf", urdf, "--params", params, "-o", again], capsys)
+    first, second = load_params_file(params), load_params_file(again)
+    assert second["external_torques.slow_gain"] == first["external_torques.slow_gain"] > 0.0
+    np.testing.assert_allclose(second["contact.thresholds"], first["contact.thresholds"], rtol=0.02)
 
 
 def test_ur10e_calibrated_on_its_excitation_runs_detects_pushes_and_nothing_in_free_motion(tmp_path, capsys):
