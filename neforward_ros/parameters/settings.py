@@ -50,8 +50,8 @@ class NodeSettings:
             :class:`neforward_ros.kinematics.effort_model.EffortModel`).
         external_method: "auto", "observer" or "difference".
         observer_gain: 1/s; observer_gains: joint name -> its own gain.
-        slow_gain: 1/s, the second, slower observer's gain (0: none); dead_zones: joint name -> how far,
-            N m (N), the observer may depart from the slow one before it shows (others 0).
+        slow_gain: 1/s, the second, slower observer's gain (0: none); dead_zones: joint name -> N m (N),
+            how far the two observers may differ with the slow one's output published (others 0).
         velocity_cutoff: Hz, the observer's velocity low-pass (0: none).
         payload: (link, mass kg, centre of mass in the link frame m), or None.
         inertials: per link (name, mass kg, centre of mass m, inertia about it (6) kg m^2) replacing
