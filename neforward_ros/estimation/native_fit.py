@@ -169,13 +169,6 @@ static void choose(double *fits, long valid, long n, const long *lo, const long 
     }
 }
 
-/* See adaptive_fit in neforward_ros/estimation/adaptive.py. times (count,), values (count, n)
-   row-major; levels, leads (nlevels,) the half-widths (largest first) and their leads; order the
-   polynomial degree and lower a second, lower degree fused with it (see fused in adaptive.py; 0: none),
-   both fitted from the same power sums and noise reading; derivative (n,) 2 or 1. out (5, n): value,
-   first and second derivative, the chosen derivative's standard deviation, strained (1 or 0). Returns
-   0 when done, 1 when the largest window is too small (the caller's function serves), 2 when memory
-   runs out. */
 /* |the combination of y[0], y[s n], ..., y[6 s n] with the weights w|: one column's normalised sixth
    divided difference (the single expression both callers use, so that they add the very same numbers) */
 static double sixth(const double *y, const double *w, long s, long n) {
@@ -314,6 +307,13 @@ static int fit_target(long count, const double *times, const double *values, lon
     return status;
 }
 
+/* See adaptive_fit in neforward_ros/estimation/adaptive.py. times (count,), values (count, n)
+   row-major; levels, leads (nlevels,) the half-widths (largest first) and their leads; order the
+   polynomial degree and lower a second, lower degree fused with it (see fused in adaptive.py; 0: none),
+   both fitted from the same power sums and noise reading; derivative (n,) 2 or 1. out (5, n): value,
+   first and second derivative, the chosen derivative's standard deviation, strained (1 or 0). Returns
+   0 when done, 1 when the largest window is too small (the caller's function serves), 2 when memory
+   runs out. */
 int adaptive_fit(long count, const double *times, const double *values, long n, double target,
                  long nlevels, const double *levels, const double *leads, long order, long lower,
                  const long *derivative, double gamma, double roughness, double sixth_gain,
