@@ -61,7 +61,7 @@ def test_c_and_numpy_choose_the_same_windows_and_agree_to_rounding() -> None:
         want = adaptive.python_adaptive_fit(t, y, target, h, order, lead, derivative, lower)
         got = native_fit.fit(lib, t, y, target, *adaptive._ladder_and_leads(h, lead), order, derivative,
                              adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._GAIN, adaptive.FLOOR,
-                             adaptive.GROWTH, lower)  # fmt: skip
+                             adaptive.GROWTH, adaptive.LATTICE, lower)  # fmt: skip
         assert got is not None
         np.testing.assert_array_equal(got[4], want[4])  # strained: the same windows chosen
         moving = slice(1, None) if still else slice(None)

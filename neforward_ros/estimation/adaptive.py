@@ -20,10 +20,14 @@ joints are sampled, and where it is not it makes the estimate cautious, not wron
 encoder's step from the smallest non-zero difference between consecutive samples (sigma = step /
 sqrt(12)), where some consecutive samples are equal (a joint that moves less than a step per sample:
 there the rounding is not white and the differences do not show it; a joint that moves several steps
-per sample rounds afresh at every sample, its rounding is white and the differences read it); the
-larger of the two is taken. A quantisation error is not white: it changes only when
-the joint crosses a step, so a window of N samples holds only about (distance travelled / step)
-independent errors, and its variance is scaled up by N over that number.
+per sample rounds afresh at every sample, its rounding is white and the differences read it), and
+every difference in the window is a whole number of that step (:data:`LATTICE`): samples on an
+encoder's grid. A fast joint's two samples that happen to round alike at a turning point (a 5 Hz sine
+at 100 Hz) are no encoder step: its smallest other difference is tens of steps, the differences are no
+multiples of it, and taking it as the step would state a noise a thousand times the real one, the
+largest window's bias hidden under it. The larger of the two is taken. A quantisation error is not
+white: it changes only when the joint crosses a step, so a window of N samples holds only about
+(distance travelled / step) independent errors, and its variance is scaled up by N over that number.
 
 G, :data:`GAMMA`, is 4: the intervals must not break on noise alone over the thousands of estimates
 a second of a robot's joints gives, and quantisation makes the noise heavier-tailed than a Gaussian.
@@ -67,6 +71,12 @@ FLOOR = 1e-9
 only by rounding, which must not break the intervals."""
 BLOCK = 2048
 """Targets fitted together by :func:`adaptive_fits`."""
+GRID_CHUNK = 1 << 20
+"""Differences checked against their windows' steps at once by the numpy fits (memory: 8 MB each)."""
+LATTICE = 0.05
+"""How far from a whole number of steps a difference between consecutive samples may be, in steps,
+for the samples to be taken as on an encoder's grid (rounding of the driver's float conversion, to
+float32 even, stays within 0.01 of a step down to 20-bit encoders)."""
 ROUGHNESS = 0.01
 """The noise, relative to the samples' spread in the largest window, above which an estimate strains."""
 _GAIN = math.sqrt(2.0 / math.pi)  # mean |N(0, 1)|
@@ -133,7 +143,16 @@ def noise_of(times: np.ndarray, values: np.ndarray, coloured: bool = True) -> tu
     still = np.any(steps == 0.0, axis=0)
     steps[steps == 0.0] = np.inf
     step = np.where(still, np.minimum.reduce(steps, axis=0), np.inf)
-    return white, np.where(np.isfinite(step), step, 0.0)
+    step = np.where(np.isfinite(step), step, 0.0)
+    return white, np.where(on_grid(first, step), step, 0.0)
+
+
+def on_grid(differences: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """Whether every difference (k, n) is a whole number of its column's ``step`` (n,) within
+    :data:`LATTICE` (False where the step is 0)."""
+    ratio = differences * (1.0 / np.where(step > 0.0, step, 1.0))
+    off = np.max(np.abs(ratio - np.round(ratio)), axis=0, initial=0.0)
+    return (step > 0.0) & (off <= LATTICE)
 
 
 def _coloured(t: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray, white: np.ndarray) -> np.ndarray:
@@ -213,6 +232,18 @@ def _window_noise(t: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray) 
     step = np.minimum.reduceat(padded, np.minimum(pairs, len(steps)), axis=0)[::2]
     step = np.where(still, step, np.inf)
     step = np.where(np.isfinite(step) & (hi - lo >= 8)[:, None], step, 0.0)
+    differences = np.diff(y, axis=0)
+    ends = np.maximum(hi - 1, lo)
+    longest = int(np.max(ends - lo, initial=0))
+    chunk = max(1, GRID_CHUNK // max(longest * y.shape[1], 1))
+    for start in range(0, len(lo), chunk):  # each window's differences on its own step's grid
+        part = slice(start, start + chunk)
+        index = lo[part, None] + np.arange(longest)
+        inside = index < ends[part, None]
+        taken = np.where(inside[:, :, None], differences[np.minimum(index, len(differences) - 1)], 0.0)
+        ratio = taken / np.where(step[part] > 0.0, step[part], 1.0)[:, None, :]
+        off = np.max(np.abs(ratio - np.round(ratio)), axis=1, initial=0.0)
+        step[part] = np.where(off <= LATTICE, step[part], 0.0)
     return white, step
 
 
@@ -259,7 +290,7 @@ def adaptive_fits(
     columns = np.full(y.shape[1], derivative)
     got = None if library is None else native_fit.fits(library, t, y, targets, *_ladder_and_leads(h_max, lead), order,
                                                        columns, GAMMA, ROUGHNESS, _GAIN, FLOOR, GROWTH,
-                                                       lower)  # fmt: skip
+                                                       LATTICE, lower)  # fmt: skip
     if got is None:
         return python_adaptive_fits(t, y, targets, h_max, order, lead, derivative, lower)
     out, done = got
@@ -362,7 +393,7 @@ def adaptive_fit(
     if library is not None:
         got = native_fit.fit(
             library, times, values, target, *_ladder_and_leads(h_max, lead), order, derivative, GAMMA, ROUGHNESS,
-            _GAIN, FLOOR, GROWTH, lower,
+            _GAIN, FLOOR, GROWTH, LATTICE, lower,
         )  # fmt: skip
         if got is not None:
             return got

@@ -196,7 +196,7 @@ static void sixths(const double *times, const double *values, long n, long lo, l
 static int fit_target(long count, const double *times, const double *values, long n, double target,
                       long nlevels, const double *levels, const double *leads, long order, long lower,
                       const long *derivative, double gamma, double roughness, double sixth_gain,
-                      double floor_, double growth, const double *pre, long pre_lo, long pre_count,
+                      double floor_, double growth, double lattice, const double *pre, long pre_lo, long pre_count,
                       long pre_strides, double *out) {
     long d = order + 1, lo[64], hi[64], valid = 0, valid_low = 0;
     if (nlevels > 64 || d > 16 || n < 1 || lower < 0 || lower >= order) return 1;
@@ -233,6 +233,12 @@ static int fit_target(long count, const double *times, const double *values, lon
                 else if (a < step[j]) step[j] = a;
             }
         for (long j = 0; j < n; j++) if (equal[j] == 0.0) step[j] = INFINITY;  /* moves every sample: white */
+        for (long i = 0; i + 1 < width; i++)  /* an encoder's grid: every difference a whole number of steps */
+            for (long j = 0; j < n; j++)
+                if (isfinite(step[j])) {
+                    double ratio = (window[(i + 1) * n + j] - window[i * n + j]) * (1.0 / step[j]);
+                    if (fabs(ratio - nearbyint(ratio)) > lattice) step[j] = INFINITY;
+                }
         /* noise from the normalised sixth divided differences of samples 1, 2, 4, 8 ... apart (see
            sixth_differences and noise_of): stride 1 is the white noise; a coloured stride counts
            while they grow at most `growth` times per doubling, once the next one agrees */
@@ -317,9 +323,9 @@ static int fit_target(long count, const double *times, const double *values, lon
 int adaptive_fit(long count, const double *times, const double *values, long n, double target,
                  long nlevels, const double *levels, const double *leads, long order, long lower,
                  const long *derivative, double gamma, double roughness, double sixth_gain,
-                 double floor_, double growth, double *out) {
+                 double floor_, double growth, double lattice, double *out) {
     return fit_target(count, times, values, n, target, nlevels, levels, leads, order, lower, derivative, gamma,
-                      roughness, sixth_gain, floor_, growth, NULL, 0, 0, 0, out);
+                      roughness, sixth_gain, floor_, growth, lattice, NULL, 0, 0, 0, out);
 }
 
 /* adaptive_fit at each of ntargets targets over the whole of times, values; derivative (n,); out
@@ -329,7 +335,7 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
 void adaptive_fits(long count, const double *times, const double *values, long n, long ntargets,
                    const double *targets, long nlevels, const double *levels, const double *leads,
                    long order, long lower, const long *derivative, double gamma, double roughness,
-                   double sixth_gain, double floor_, double growth, double *out, int *status) {
+                   double sixth_gain, double floor_, double growth, double lattice, double *out, int *status) {
     const long block = 256;
     for (long first = 0; first < ntargets; first += block) {
         long last = first + block < ntargets ? first + block : ntargets, lo = count, hi = 0, widest = 0;
@@ -349,7 +355,8 @@ void adaptive_fits(long count, const double *times, const double *values, long n
         if (pre != NULL) sixths(times, values, n, lo, hi, strides, pre);
         for (long m = first; m < last; m++)
             status[m] = fit_target(count, times, values, n, targets[m], nlevels, levels, leads, order, lower,
-                                   derivative, gamma, roughness, sixth_gain, floor_, growth, pre, lo, hi - lo,
+                                   derivative, gamma, roughness, sixth_gain, floor_, growth, lattice, pre, lo,
+                                   hi - lo,
                                    pre == NULL ? 0 : strides, out + m * 5 * n);
         free(pre);
     }
@@ -415,11 +422,11 @@ class NativeAdaptiveFit:
 def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
     double, pointer, long = ctypes.c_double, ctypes.c_void_p, ctypes.c_long
     library.adaptive_fit.argtypes = [long, pointer, pointer, long, double, long, pointer, pointer, long, long,
-                                     pointer, double, double, double, double, double, pointer]  # fmt: skip
+                                     pointer, double, double, double, double, double, double, pointer]  # fmt: skip
     library.adaptive_fit.restype = ctypes.c_int
     library.adaptive_fits.argtypes = [long, pointer, pointer, long, long, pointer, long, pointer, pointer,
-                                      long, long, pointer, double, double, double, double, double, pointer,
-                                      pointer]  # fmt: skip
+                                      long, long, pointer, double, double, double, double, double, double,
+                                      pointer, pointer]  # fmt: skip
     library.adaptive_fits.restype = None
     return library
 
@@ -442,6 +449,7 @@ def fit(
     sixth_gain: float,
     floor: float,
     growth: float,
+    lattice: float,
     lower: int | None = None,
 ) -> tuple[np.ndarray, ...] | None:
     """The C function's value, first and second derivative, standard deviation and strain (n,) each;
@@ -449,7 +457,7 @@ def fit(
     a second degree fused with ``order`` (:func:`neforward_ros.estimation.adaptive.fused`), in the same
     call."""
     got = fits(library, times, values, np.array([target], dtype=float), half_widths, leads, order, derivative,
-               gamma, roughness, sixth_gain, floor, growth, lower)  # fmt: skip
+               gamma, roughness, sixth_gain, floor, growth, lattice, lower)  # fmt: skip
     if got is None or not got[1][0]:
         return None
     out = got[0][0]
@@ -470,6 +478,7 @@ def fits(
     sixth_gain: float,
     floor: float,
     growth: float,
+    lattice: float,
     lower: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The C function at every target over the whole of ``times, values``: value, first and second
@@ -492,7 +501,8 @@ def fits(
         library.adaptive_fits(len(times), times.ctypes.data, values.ctypes.data, n, count,
                               targets[part].ctypes.data, len(half_widths), half_widths.ctypes.data,
                               leads.ctypes.data, order, lower or 0, derivative.ctypes.data, gamma, roughness,
-                              sixth_gain, floor, growth, out[part].ctypes.data, status[part].ctypes.data)  # fmt: skip
+                              sixth_gain, floor, growth, lattice, out[part].ctypes.data,
+                              status[part].ctypes.data)  # fmt: skip
 
     # Each target is fitted on its own (the C function keeps nothing from one to the next), and a
     # ctypes call releases the GIL: a whole recording's targets are shared among the cores.
