@@ -26,8 +26,11 @@ encoder's grid. A fast joint's two samples that happen to round alike at a turni
 at 100 Hz) are no encoder step: its smallest other difference is tens of steps, the differences are no
 multiples of it, and taking it as the step would state a noise a thousand times the real one, the
 largest window's bias hidden under it. The larger of the two is taken. A quantisation error is not
-white: it changes only when the joint crosses a step, so a window of N samples holds only about
-(distance travelled / step) independent errors, and its variance is scaled up by N over that number.
+white: it changes only when the reading changes, so a window of N samples holds only (changes of
+the reading + 1) independent errors, and its variance is scaled up by N over that number (counted in
+each window: at a turning point the reading rests on a step for a few samples and changes at every
+sample around them; counting from the speed at the estimate, zero there, took the whole window for
+one error).
 
 G, :data:`GAMMA`, is 4: the intervals must not break on noise alone over the thousands of estimates
 a second of a robot's joints gives, and quantisation makes the noise heavier-tailed than a Gaussian.
@@ -197,15 +200,16 @@ def accel_std(
     white: np.ndarray,
     step: np.ndarray,
     count: np.ndarray,
-    travel: np.ndarray,
+    changes: np.ndarray,
     position: np.ndarray,
 ) -> np.ndarray:
     """The standard deviation of q'' from a fit: ``variance`` its factor for unit white noise,
-    ``count`` samples in the window, ``travel`` the distance the joint moved across it, ``position``
-    the joint's position (the noise is at least :data:`FLOOR` of it: samples without any noise are
-    still rounded, and the fits with them)."""
+    ``count`` samples in the window, ``changes`` how many times the samples change across it (an
+    encoder's rounding is drawn afresh only when the reading changes: the window holds changes + 1
+    independent rounding errors), ``position`` the joint's position (the noise is at least
+    :data:`FLOOR` of it: samples without any noise are still rounded, and the fits with them)."""
     quantisation = step**2 / 12.0
-    crossings = np.where(step > 0.0, travel / np.where(step > 0.0, step, 1.0), count)
+    crossings = np.where(step > 0.0, changes + 1.0, count)
     independent = np.minimum(np.maximum(crossings, 1.0), np.maximum(count, 1.0))
     effective = np.maximum(np.maximum(white**2, quantisation * count / independent), (FLOOR * position) ** 2)
     return np.sqrt(np.maximum(variance, 0.0) * effective)
@@ -347,21 +351,22 @@ def _block_fits(
     is too small at every target of the block are not fitted."""
     needed = order + 3
     fits = []
+    changes = []
+    changed = np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(y[1:] != y[:-1], axis=0)])  # up to each sample
     for h in levels:
         level_lead = _lead(h, lead)
-        counts = np.searchsorted(t, targets + level_lead, side="right") - np.searchsorted(
-            t, targets + level_lead - 2.0 * h, side="left"
-        )
-        if fits and not np.any(counts >= needed):
+        hi = np.searchsorted(t, targets + level_lead, side="right")
+        lo = np.searchsorted(t, targets + level_lead - 2.0 * h, side="left")
+        if fits and not np.any(hi - lo >= needed):
             break  # smaller windows hold fewer samples still
         fits.append(polynomial_fits(t, y, targets, h, order, level_lead, variance=True))
-    used = levels[: len(fits)]
+        last = np.clip(hi - 1, 0, len(changed) - 1)
+        changes.append(changed[last] - changed[np.minimum(lo, last)])
     valid = np.stack([f[5] >= needed for f in fits])[:, :, None]
-    speed = np.abs(fits[0][1])
     estimates = np.stack([f[derivative] for f in fits])
     stds = np.stack([
-        accel_std(f[2 + derivative][:, None], white, step, f[5][:, None], speed * 2.0 * h, fits[0][0])
-        for f, h in zip(fits, used, strict=True)
+        accel_std(f[2 + derivative][:, None], white, step, f[5][:, None], c, fits[0][0])
+        for f, c in zip(fits, changes, strict=True)
     ])  # fmt: skip
     chosen, _ = select(estimates, stds, np.broadcast_to(valid, estimates.shape))
     pick = chosen[None]
@@ -433,8 +438,10 @@ def python_adaptive_fit(
     second = derivative == 2
     estimates = np.where(second, d2, d1)
     variance = np.where(second, var2[:, None], var1[:, None])
-    speed = np.abs(d1[0])
-    stds = accel_std(variance, white, step, counts[:, None], speed * 2.0 * levels[:, None], value[0])
+    changed = np.concatenate([np.zeros((1, window.shape[1])), np.cumsum(window[1:] != window[:-1], axis=0)])
+    last = np.maximum(end - 1, 0)
+    changes = changed[last] - changed[np.minimum(start, last)]  # (levels, n) within each level's window
+    stds = accel_std(variance, white, step, counts[:, None], changes, value[0])
     chosen, _ = select(estimates, stds, np.broadcast_to(valid[:, None], estimates.shape))
     columns = np.arange(values.shape[1])
     smallest = max(int(np.count_nonzero(valid)) - 1, 0)  # the windows are nested: valid ones come first

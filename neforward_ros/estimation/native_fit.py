@@ -135,19 +135,19 @@ static int level_fit(const double *sums, const double *moments, long n, long ord
 }
 
 /* The ICI rule over the `valid` levels' fits (valid, n, 5) of one degree, into out (5, n): value,
-   first and second derivative, standard deviation, strained. */
-static void choose(double *fits, long valid, long n, const long *lo, const long *hi, const double *levels,
+   first and second derivative, standard deviation, strained. changes (levels, n): how many times each
+   column's samples change within each level's window. */
+static void choose(double *fits, long valid, long n, const long *lo, const long *hi, const double *changes,
                    const long *derivative, const double *white, const double *step, const double *spread,
                    double gamma, double roughness, double floor_, double *out) {
     for (long j = 0; j < n; j++) {
-        double speed = fabs(fits[j * 5 + 1]);  /* level 0's first derivative */
         double low_run = -INFINITY, high_run = INFINITY;
         long chosen = -1;
         int meets[64];
         for (long l = valid - 1; l >= 0; l--) {
             double *fit = fits + (l * n + j) * 5, cnt = (double)(hi[l] - lo[l]);
-            double quantisation = step[j] * step[j] / 12.0, travel = speed * 2.0 * levels[l];
-            double crossings = step[j] > 0.0 ? travel / step[j] : cnt;
+            double quantisation = step[j] * step[j] / 12.0;
+            double crossings = step[j] > 0.0 ? changes[l * n + j] + 1.0 : cnt;
             double independent = nmin(nmax(crossings, 1.0), nmax(cnt, 1.0));
             double least = floor_ * fits[j * 5];  /* level 0's value */
             double effective = nmax(nmax(white[j] * white[j], quantisation * cnt / independent), least * least);
@@ -209,11 +209,20 @@ static int fit_target(long count, const double *times, const double *values, lon
     if (valid == 0) return 1;
     if (lower == 0) valid_low = 0;
     long width = hi[0] - lo[0], rings = valid > valid_low ? valid : valid_low;
-    double *scratch = malloc(sizeof(double) * (n + d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n));
+    double *scratch = malloc(sizeof(double) * (n + d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n
+                                               + (size_t)rings * n));
     if (scratch == NULL) return 2;
     double *equal = scratch, *moments = equal + n, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
     double *out_low = fits_low + 5 * (size_t)valid_low * n;
     double *white = out_low + 5 * (size_t)n, *step = white + n, *spread = step + n;
+    double *changes = spread + 4 * n;  /* after previous, candidate, alive: (rings, n) */
+    for (long l = 0; l < rings; l++)  /* each level's changes between consecutive samples */
+        for (long j = 0; j < n; j++) {
+            double count_changes = 0.0;
+            for (long i = lo[l]; i + 1 < hi[l]; i++)
+                if (values[(i + 1) * n + j] != values[i * n + j]) count_changes += 1.0;
+            changes[l * n + j] = count_changes;
+        }
     /* the noise, from the largest window, every column at once (rows are contiguous): the samples'
        deviation, the mean |sixth difference|, the smallest non-zero step */
     const double *window = values + lo[0] * n;
@@ -296,9 +305,9 @@ static int fit_target(long count, const double *times, const double *values, lon
         }
     }
     if (status == 0) {
-        choose(fits, valid, n, lo, hi, levels, derivative, white, step, spread, gamma, roughness, floor_, out);
+        choose(fits, valid, n, lo, hi, changes, derivative, white, step, spread, gamma, roughness, floor_, out);
         if (valid_low > 0) {
-            choose(fits_low, valid_low, n, lo, hi, levels, derivative, white, step, spread, gamma, roughness,
+            choose(fits_low, valid_low, n, lo, hi, changes, derivative, white, step, spread, gamma, roughness,
                    floor_, out_low);
             for (long j = 0; j < n; j++) {  /* fused: the lower degree where it agrees and is the quieter */
                 long k = derivative[j] == 2 ? 2 : 1;
