@@ -24,7 +24,7 @@ per sample rounds afresh at every sample, its rounding is white and the differen
 every difference in the window is a whole number of that step (:data:`LATTICE`): samples on an
 encoder's grid. A fast joint's two samples that happen to round alike at a turning point (a 5 Hz sine
 at 100 Hz) are no encoder step: its smallest other difference is tens of steps, the differences are no
-multiples of it, and taking it as the step would state a noise a thousand times the real one, the
+multiples of it, and taking it as the step would state a noise hundreds of times the real one, the
 largest window's bias hidden under it. The larger of the two is taken. A quantisation error is not
 white: it changes only when the reading changes, so a window of N samples holds only (changes of
 the reading + 1) independent errors, and its variance is scaled up by N over that number (counted in
