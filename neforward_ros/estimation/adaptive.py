@@ -151,11 +151,25 @@ def noise_of(times: np.ndarray, values: np.ndarray, coloured: bool = True) -> tu
 
 
 def on_grid(differences: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """Whether every difference (k, n) is a whole number of its column's ``step`` (n,) within
-    :data:`LATTICE` (False where the step is 0)."""
-    ratio = differences * (1.0 / np.where(step > 0.0, step, 1.0))
-    off = np.max(np.abs(ratio - np.round(ratio)), axis=0, initial=0.0)
+    """Whether every difference (..., k, n) is a whole number of its column's ``step`` (..., n)
+    within :data:`LATTICE` (False where the step is 0)."""
+    ratio = differences * (1.0 / np.where(step > 0.0, step, 1.0))[..., None, :]
+    off = np.max(np.abs(ratio - np.round(ratio)), axis=-2, initial=0.0)
     return (step > 0.0) & (off <= LATTICE)
+
+
+def changes_up_to(y: np.ndarray) -> np.ndarray:
+    """(T, n): how many times each column of y (T, n) changes between consecutive samples up to each
+    sample (:func:`changes_within` counts a window's from it)."""
+    return np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(y[1:] != y[:-1], axis=0)])
+
+
+def changes_within(changed: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(changes (M, n), pairs of consecutive samples (M,)) within the windows [lo, hi) (M,) of the
+    samples whose :func:`changes_up_to` is ``changed``."""
+    last = np.clip(hi - 1, 0, len(changed) - 1)
+    first = np.minimum(lo, last)
+    return changed[last] - changed[first], last - first
 
 
 def _coloured(t: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray, white: np.ndarray) -> np.ndarray:
@@ -215,9 +229,11 @@ def accel_std(
     return np.sqrt(np.maximum(variance, 0.0) * effective)
 
 
-def _window_noise(t: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _window_noise(
+    t: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray, changed: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """:func:`noise_of` of the samples [lo, hi) of y (T, n) at t (T,), for many windows at once: two
-    (M, n)."""
+    (M, n). ``changed``: y's :func:`changes_up_to`."""
     sixth = np.abs(sixth_differences(t, y))
     total = np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(sixth, axis=0)])
     last = np.clip(hi - 6, 0, len(sixth))  # sixth differences wholly inside: [lo, hi - 6)
@@ -226,17 +242,16 @@ def _window_noise(t: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray) 
                      0.0) / _GAIN  # fmt: skip
     white[hi - lo < 8] = 0.0
     white = _coloured(t, y, lo, hi, white)
-    steps = np.abs(np.diff(y, axis=0))
-    zeros = np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(steps == 0.0, axis=0)])
-    changes = np.clip(hi - 1, 0, len(steps))  # the changes wholly inside: [lo, hi - 1)
-    still = zeros[changes] - zeros[np.minimum(lo, changes)] > 0
+    differences = np.diff(y, axis=0)
+    changes, pairs_inside = changes_within(changed, lo, hi)
+    still = changes < pairs_inside[:, None]  # some neighbours inside are equal
+    steps = np.abs(differences)
     steps = np.where(steps > 0.0, steps, np.inf)
     pairs = np.stack([lo, np.maximum(hi - 1, lo + 1)], axis=1).reshape(-1)
     padded = np.concatenate([steps, np.full((1, y.shape[1]), np.inf)])
     step = np.minimum.reduceat(padded, np.minimum(pairs, len(steps)), axis=0)[::2]
     step = np.where(still, step, np.inf)
     step = np.where(np.isfinite(step) & (hi - lo >= 8)[:, None], step, 0.0)
-    differences = np.diff(y, axis=0)
     ends = np.maximum(hi - 1, lo)
     longest = int(np.max(ends - lo, initial=0))
     chunk = max(1, GRID_CHUNK // max(longest * y.shape[1], 1))
@@ -245,9 +260,7 @@ def _window_noise(t: np.ndarray, y: np.ndarray, lo: np.ndarray, hi: np.ndarray) 
         index = lo[part, None] + np.arange(longest)
         inside = index < ends[part, None]
         taken = np.where(inside[:, :, None], differences[np.minimum(index, len(differences) - 1)], 0.0)
-        ratio = taken / np.where(step[part] > 0.0, step[part], 1.0)[:, None, :]
-        off = np.max(np.abs(ratio - np.round(ratio)), axis=1, initial=0.0)
-        step[part] = np.where(off <= LATTICE, step[part], 0.0)
+        step[part] = np.where(on_grid(taken, step[part]), step[part], 0.0)
     return white, step
 
 
@@ -325,11 +338,12 @@ def python_adaptive_fits(
     first_lead = _lead(levels[0], lead)
     lo = np.searchsorted(t, targets + first_lead - 2.0 * levels[0], side="left")
     hi = np.searchsorted(t, targets + first_lead, side="right")
-    white, step = _window_noise(t, y, lo, hi)
+    changed = changes_up_to(y)
+    white, step = _window_noise(t, y, lo, hi, changed)
     out = [np.empty((len(targets), y.shape[1])) for _ in range(4)]
     for start in range(0, len(targets), BLOCK):  # a block of targets at a time: its levels stay in cache
         part = slice(start, start + BLOCK)
-        chosen = _block_fits(t, y, targets[part], levels, order, lead, derivative, white[part], step[part])
+        chosen = _block_fits(t, y, targets[part], levels, order, lead, derivative, white[part], step[part], changed)
         for whole, level in zip(out, chosen, strict=True):
             whole[part] = level
     return out[0], out[1], out[2], out[3]
@@ -345,14 +359,14 @@ def _block_fits(
     derivative: int,
     white: np.ndarray,
     step: np.ndarray,
+    changed: np.ndarray,
 ) -> list[np.ndarray]:
     """:func:`adaptive_fits` for a block of targets, with their windows' noise: value, first and
     second derivative, and the chosen derivative's standard deviation (M, n). Levels whose window
-    is too small at every target of the block are not fitted."""
+    is too small at every target of the block are not fitted. ``changed``: y's :func:`changes_up_to`."""
     needed = order + 3
     fits = []
     changes = []
-    changed = np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(y[1:] != y[:-1], axis=0)])  # up to each sample
     for h in levels:
         level_lead = _lead(h, lead)
         hi = np.searchsorted(t, targets + level_lead, side="right")
@@ -360,8 +374,7 @@ def _block_fits(
         if fits and not np.any(hi - lo >= needed):
             break  # smaller windows hold fewer samples still
         fits.append(polynomial_fits(t, y, targets, h, order, level_lead, variance=True))
-        last = np.clip(hi - 1, 0, len(changed) - 1)
-        changes.append(changed[last] - changed[np.minimum(lo, last)])
+        changes.append(changes_within(changed, lo, hi)[0])
     valid = np.stack([f[5] >= needed for f in fits])[:, :, None]
     estimates = np.stack([f[derivative] for f in fits])
     stds = np.stack([
@@ -438,9 +451,7 @@ def python_adaptive_fit(
     second = derivative == 2
     estimates = np.where(second, d2, d1)
     variance = np.where(second, var2[:, None], var1[:, None])
-    changed = np.concatenate([np.zeros((1, window.shape[1])), np.cumsum(window[1:] != window[:-1], axis=0)])
-    last = np.maximum(end - 1, 0)
-    changes = changed[last] - changed[np.minimum(start, last)]  # (levels, n) within each level's window
+    changes, _ = changes_within(changes_up_to(window), start, end)  # (levels, n) within each level's window
     stds = accel_std(variance, white, step, counts[:, None], changes, value[0])
     chosen, _ = select(estimates, stds, np.broadcast_to(valid[:, None], estimates.shape))
     columns = np.arange(values.shape[1])
