@@ -11,7 +11,8 @@ polynomial fit whose window reaches at most d past the estimate, its window and 
 motion knowing the truth. Printed per case and setting: q-ddot's relative RMS error (RMS of the error
 over RMS of q-ddot, after the first second and before the last half second, at up to 600 evaluated
 samples) and its ratio to the reference; then each setting's median and worst ratio against the
-target (issue 26: at most 1.5 for every setting on every motion), and the cost per message. With
+target (issue 26: at most 1.5 for every setting on every motion), the cost per message, and the
+honesty of the stated standard deviation (RMS of error / sigma per case: 1 for an honest sigma). With
 --plot, the trade-off figure: each setting's delay against its median and worst error.
 
 Usage: python bench/bench_estimator_family.py [--seconds 4] [--plot docs/estimators.png] [--quick]
@@ -50,18 +51,22 @@ SEED = 100  # the tests use other seeds and other motions
 EVALUATED = 600
 
 
-def run(t: np.ndarray, q: np.ndarray, settings: StreamSettings) -> tuple[np.ndarray, np.ndarray, float]:
+def run(t: np.ndarray, q: np.ndarray, settings: StreamSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """(sample index, accelerations, their stated standard deviations (NaN: none), cost per message)."""
     names = [f"j{k}" for k in range(q.shape[1])]
     estimator = StreamingEstimator(names, settings=settings)
     stamps = (t * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
-    out: dict[int, np.ndarray] = {}
+    out: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+    unknown = np.full(q.shape[1], np.nan)
     started = time.perf_counter()
     for k in range(len(t)):
         for estimate in estimator.update(int(stamps[k]), names, q[k].tolist()):
-            out[estimate.stamp_ns] = estimate.accelerations
+            std = estimate.acceleration_std
+            out[estimate.stamp_ns] = (estimate.accelerations, unknown if std is None else std)
     cost = (time.perf_counter() - started) / len(t)
     keys = sorted(out)
-    return np.searchsorted(stamps, np.array(keys)), np.array([out[s] for s in keys]), cost
+    index = np.searchsorted(stamps, np.array(keys))
+    return index, np.array([out[s][0] for s in keys]), np.array([out[s][1] for s in keys]), cost
 
 
 def main() -> None:
@@ -74,6 +79,7 @@ def main() -> None:
     errors: dict[str, list[float]] = {name: [] for name in SETTINGS}
     ratios: dict[str, list[float]] = {name: [] for name in SETTINGS}
     costs: dict[str, list[float]] = {name: [] for name in SETTINGS}
+    honesty: dict[str, list[float]] = {name: [] for name in SETTINGS}
     worst: dict[str, tuple[float, str]] = {}
     print("per case and setting: q-ddot relative RMS error, and its ratio to hindsight for the setting's delay")
     print(f"{'motion':<10}{'rate':>5}{'bits':>5}{'rep':>4}  " + "".join(f"{s:>20}" for s in SHORT))
@@ -91,11 +97,15 @@ def main() -> None:
                     delay = round(settings.effective_lag, 6)
                     if delay not in references:
                         references[delay] = best(t[fresh], q[fresh], qdd[fresh], in_fresh, delay)[0]
-                    index, estimate, cost = run(t, q, settings)
+                    index, estimate, std, cost = run(t, q, settings)
                     at = np.searchsorted(index, evaluated)
                     found = (at < len(index)) & (index[np.minimum(at, len(index) - 1)] == evaluated)
                     values = np.full((len(evaluated), q.shape[1]), np.nan)
                     values[found] = estimate[at[found]]
+                    stds = np.full(values.shape, np.nan)
+                    stds[found] = std[at[found]]
+                    z = (values - qdd[evaluated]) / stds
+                    honesty[name].append(float(np.sqrt(np.nanmean(z**2))) if np.isfinite(z).any() else np.nan)
                     e = relative_rms(values, qdd[evaluated]) if found.any() else np.inf
                     ratio = e / references[delay]
                     errors[name].append(e)
@@ -118,6 +128,11 @@ def main() -> None:
               f"{np.max(errors[name]):.2%}; ratio to hindsight median {np.median(values):.2f}, worst "
               f"{values.max():.2f} ({worst[name][1]}): target <= {TARGET:g} {verdict}; "
               f"{np.median(costs[name]) * 1e6:.0f} us per message")  # fmt: skip
+        z = np.array(honesty[name])
+        if np.isfinite(z).any():
+            inside = np.mean((z >= 0.5) & (z <= 2.0))
+            print(f"  stated sigma: RMS((q-ddot - truth) / sigma) median {np.nanmedian(z):.2f}, from "
+                  f"{np.nanmin(z):.2f} to {np.nanmax(z):.2f}; within 0.5-2 on {inside:.0%} of the cases")  # fmt: skip
     if args.plot is not None:
         import matplotlib
 

@@ -135,11 +135,12 @@ static int level_fit(const double *sums, const double *moments, long n, long ord
 }
 
 /* The ICI rule over the `valid` levels' fits (valid, n, 5) of one degree, into out (5, n): value,
-   first and second derivative, standard deviation, strained. changes (levels, n): how many times each
-   column's samples change within each level's window. */
+   first and second derivative, stated standard deviation (see stated_std in adaptive.py), strained;
+   and into noise (n,) the chosen level's noise's standard deviation. changes (levels, n): how many
+   times each column's samples change within each level's window. */
 static void choose(double *fits, long valid, long n, const long *lo, const long *hi, const double *changes,
                    const long *derivative, const double *white, const double *step, const double *spread,
-                   double gamma, double roughness, double floor_, double *out) {
+                   double gamma, double roughness, double floor_, double *out, double *noise) {
     for (long j = 0; j < n; j++) {
         double low_run = -INFINITY, high_run = INFINITY;
         long chosen = -1;
@@ -165,6 +166,13 @@ static void choose(double *fits, long valid, long n, const long *lo, const long 
         long smallest_level = valid - 1;
         int strained = (chosen == smallest_level && smallest_level > 0) || white[j] > roughness * spread[j];
         for (long k = 0; k < 4; k++) out[k * n + j] = fit[k];
+        noise[j] = fit[3];
+        if (chosen + 1 < valid) {  /* the distance to the next smaller window's estimate, in quadrature */
+            const double *below = fits + ((chosen + 1) * n + j) * 5;
+            long k = derivative[j] == 2 ? 2 : 1;
+            double apart = fit[k] - below[k];
+            out[3 * n + j] = sqrt(fit[3] * fit[3] + apart * apart);
+        }
         out[4 * n + j] = strained ? 1.0 : 0.0;
     }
 }
@@ -210,12 +218,13 @@ static int fit_target(long count, const double *times, const double *values, lon
     if (lower == 0) valid_low = 0;
     long width = hi[0] - lo[0], rings = valid > valid_low ? valid : valid_low;
     double *scratch = malloc(sizeof(double) * (n + d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n
-                                               + (size_t)rings * n));
+                                               + (size_t)rings * n + 2 * (size_t)n));
     if (scratch == NULL) return 2;
     double *equal = scratch, *moments = equal + n, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
     double *out_low = fits_low + 5 * (size_t)valid_low * n;
     double *white = out_low + 5 * (size_t)n, *step = white + n, *spread = step + n;
     double *changes = spread + 4 * n;  /* after previous, candidate, alive: (rings, n) */
+    double *noise = changes + (size_t)rings * n, *noise_low = noise + n;
     for (long l = 0; l < rings; l++)  /* each level's changes between consecutive samples */
         for (long j = 0; j < n; j++) {
             double count_changes = 0.0;
@@ -305,14 +314,15 @@ static int fit_target(long count, const double *times, const double *values, lon
         }
     }
     if (status == 0) {
-        choose(fits, valid, n, lo, hi, changes, derivative, white, step, spread, gamma, roughness, floor_, out);
+        choose(fits, valid, n, lo, hi, changes, derivative, white, step, spread, gamma, roughness, floor_, out,
+               noise);
         if (valid_low > 0) {
             choose(fits_low, valid_low, n, lo, hi, changes, derivative, white, step, spread, gamma, roughness,
-                   floor_, out_low);
+                   floor_, out_low, noise_low);
             for (long j = 0; j < n; j++) {  /* fused: the lower degree where it agrees and is the quieter */
                 long k = derivative[j] == 2 ? 2 : 1;
                 double apart = fabs(out_low[k * n + j] - out[k * n + j]);
-                double std_low = out_low[3 * n + j], std_high = out[3 * n + j];
+                double std_low = noise_low[j], std_high = noise[j];
                 if (apart <= gamma * hypot(std_low, std_high) && std_low <= std_high)
                     for (long q = 0; q < 5; q++) out[q * n + j] = out_low[q * n + j];
             }
