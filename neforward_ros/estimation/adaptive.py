@@ -217,14 +217,12 @@ def select(
     return np.argmax(meets, axis=0), meets.any(axis=0)
 
 
-def stated_std(estimates: np.ndarray, stds: np.ndarray, valid: np.ndarray, chosen: np.ndarray) -> np.ndarray:
+def stated_std(estimates: np.ndarray, valid: np.ndarray, chosen: np.ndarray, std: np.ndarray) -> np.ndarray:
     """The standard deviation stated with the ICI choice ``chosen`` (...) among the levels' (L, ...)
-    ``estimates`` with noise ``stds``: the chosen level's noise and its estimate's distance to the next
-    smaller valid level's, added in quadrature (the chosen level's alone where it is the smallest)."""
+    ``estimates``, ``std`` (...) the chosen level's noise: that noise and the chosen estimate's distance
+    to the next smaller valid level's, added in quadrature (the noise alone where it is the smallest)."""
     below = np.minimum(chosen + 1, len(estimates) - 1)[None]
-    pick = chosen[None]
-    std = np.take_along_axis(stds, pick, 0)[0]
-    apart = np.take_along_axis(estimates, pick, 0)[0] - np.take_along_axis(estimates, below, 0)[0]
+    apart = np.take_along_axis(estimates, chosen[None], 0)[0] - np.take_along_axis(estimates, below, 0)[0]
     smaller = (below[0] > chosen) & np.take_along_axis(valid, below, 0)[0]
     return np.where(smaller, np.sqrt(std * std + apart * apart), std)
 
@@ -423,7 +421,8 @@ def _block_fits(
     chosen, _ = select(estimates, stds, valid)
     pick = chosen[None]
     picked = [np.take_along_axis(np.stack([f[i] for f in fits]), pick, 0)[0] for i in range(3)]
-    return [*picked, np.take_along_axis(stds, pick, 0)[0], stated_std(estimates, stds, valid, chosen)]
+    noise = np.take_along_axis(stds, pick, 0)[0]
+    return [*picked, noise, stated_std(estimates, valid, chosen, noise)]
 
 
 def adaptive_fit(
@@ -515,11 +514,12 @@ def _numpy_fit(
     centred = window - np.add.reduce(window, axis=0) * (1.0 / len(window))
     spread = np.sqrt(np.einsum("ij,ij->j", centred, centred) * (1.0 / len(window)))  # the samples' deviation
     rough = white > ROUGHNESS * spread
+    noise = stds[chosen, columns]
     return (
         value[chosen, columns],
         d1[chosen, columns],
         d2[chosen, columns],
-        stds[chosen, columns],
+        noise,
         ((chosen == smallest) & (smallest > 0)) | rough,
-        stated_std(estimates, stds, usable, chosen),
+        stated_std(estimates, usable, chosen, noise),
     )
