@@ -32,8 +32,7 @@ def bank_cost(t: np.ndarray, q: np.ndarray, stamps: np.ndarray, lag: int) -> flo
     for k in range(len(t)):
         bank.add(int(stamps[k]), q[k], missing)
         target = int(stamps[max(k - lag, 0)])
-        bank.estimate(target)
-        bank.acceleration_std()
+        bank.estimate(target)  # and its spread
         bank.forget_before(target)
     return (time.perf_counter() - started) / len(t)
 

@@ -358,7 +358,8 @@ def test_kalman_filter_and_smoother_equal_dense_gaussian_process_regression(
     """The recursive estimates (filter, fixed-lag smoother) of a bank of two models run as one batched
     filter, against each model's posterior mean computed in one dense solve over every sample (no
     recursion), from positions alone or with measured velocities; at the samples' stamps and at a
-    stamp between two samples (carried forward from the step before it). With ``unrolled`` 4, the
+    stamp between two samples (carried forward from the step before it). The acceleration's variance
+    stated with each (filtered, or smoothed over the lag) against the posterior's. With ``unrolled`` 4, the
     smoothed estimates 7 samples back are older than the unrolled ones and go back step by step; a
     third of the way the track is copied by ``select`` (its history with it)."""
     if unrolled is not None:
@@ -402,6 +403,7 @@ def test_kalman_filter_and_smoother_equal_dense_gaussian_process_regression(
             checked_between += 1
         for stamp, node in wanted:
             got = track.estimate(stamp)  # (models, 3, joints)
+            variances = track.acceleration_variance(stamp)  # (models,)
             for m, (model, (covariance, h)) in enumerate(zip(models, dense, strict=True)):
                 dim, hs = model.dim, h[seen]
                 gain = _refined_solve(hs @ covariance @ hs.T + np.diag(noise[seen]), measured[seen])
@@ -412,6 +414,16 @@ def test_kalman_filter_and_smoother_equal_dense_gaussian_process_regression(
                 # of the acceleration at the samples, a few 1e-6 at the node between them
                 tolerance = 1e-5 if node == middle + 1 else 2e-6
                 assert np.all(np.abs(got[m] - expected) <= tolerance * scale), (k, m, stamp, got[m], expected)
+                # the acceleration's posterior variance: the prior's less what the samples seen tell
+                block = slice(node * dim, (node + 1) * dim)
+                told = covariance[block] @ hs.T  # (dim, seen)
+                settled = covariance[block, block] - told @ _refined_solve(
+                    hs @ covariance @ hs.T + np.diag(noise[seen]), told.T
+                )
+                row = model.readout[2]
+                # exact at the steps (the same rounding as the means'); between two, interpolated in time
+                closeness = 0.15 if node == middle + 1 and lag_samples else 1e-5
+                assert variances[m] == pytest.approx(row @ settled @ row, rel=closeness), (k, m, stamp)
         track.forget_before(int(stamps[target]))
         if k == count // 3:
             track = track.select([0, 1])

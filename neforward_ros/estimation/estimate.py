@@ -28,8 +28,9 @@ class JointEstimate:
             stamp, else interpolated between the samples around it; NaN where there are none. None
             when not known at all (supplied states without efforts).
         acceleration_std: the estimate's own standard deviation of each acceleration (from the
-            noise read from the samples, the fit's or the filter's), rad/s^2 (m/s^2); NaN where the
-            estimator does not give one; None when not known at all.
+            noise read from the samples: the fit's, or the filter's or smoother's posterior scaled by
+            the recent innovations), rad/s^2 (m/s^2); NaN where the estimator does not give one; None
+            when not known at all.
     """
 
     stamp_ns: int

@@ -18,6 +18,14 @@ two batched products for all the steps kept (at most :data:`UNROLLED`: older ste
 caller that never forgets keeps, go back step by step), and an estimate at a step is one product
 more. An estimate between steps (a stamp whose sample was not filtered) goes back step by step and
 carries the state forward to it.
+
+The smoothed covariance goes back the same way: S_k = E_k + G_k S_(k+1) G_k^T, with E_k = P_k -
+G_k Pp_(k+1) G_k^T (P_k filtered, Pp_(k+1) predicted; the Rauch-Tung-Striebel recursion) and S_N
+= P_N. Unrolled, the read-out's variance at step k is d_k + P_k P_N P_k^T: when a sample N + 1
+arrives, every d_k gains P_k E_N P_k^T (the acceleration's row only: one batched product more). The
+variance stated with a fixed-lag estimate is the smoothed one at its step (several times smaller
+than the newest sample's filtered variance at a 20 ms lag); between two steps it is interpolated
+linearly in time between theirs.
 """
 
 from __future__ import annotations
@@ -49,7 +57,8 @@ UNROLLED = 1024
 class _Step:
     """One sample's filter output, per model: the state after the measurement (models, dim, m), the
     prediction before it, the covariance after the measurement (models, dim, dim), and the smoother
-    gain and offset towards the next step (set when the next sample arrives)."""
+    gain, offset and E_k (the module docstring's) towards the next step (set when the next sample
+    arrives)."""
 
     stamp: int
     filtered: np.ndarray
@@ -57,6 +66,7 @@ class _Step:
     covariance: np.ndarray
     gain: np.ndarray | None = None
     offset: np.ndarray | None = None
+    settled: np.ndarray | None = None
 
 
 class KalmanTrack:
@@ -98,8 +108,9 @@ class KalmanTrack:
                 # G = P_f F^T P_pred^-1 (an explicit inverse: numpy's batched solve costs more at this size)
                 gain = carried @ _inverse(covariance)
                 last.gain, last.offset = gain, last.filtered - gain @ state
+                last.settled = last.covariance - carried @ gain.transpose(0, 2, 1)  # P - G Pp G^T (G Pp = P F^T)
                 if self._unrolled is not None:
-                    self._unrolled.advance(gain, last.offset)
+                    self._unrolled.advance(gain, last.offset, last.settled)
         predicted = state
         first = not self.steps
         if np.isfinite(velocities).all():
@@ -140,20 +151,26 @@ class KalmanTrack:
             return np.zeros((count, len(positions)))
         return likelihood
 
-    def estimate(self, target: int) -> np.ndarray:
-        """(models, 3, m) position, velocity and acceleration at the target stamp: smoothed over every
-        step kept after it, from the newest step <= target, carried forward to the target by the model."""
+    def _index(self, target: int) -> int:
+        """The newest kept step at or before the target (the oldest if none is)."""
         steps = self.steps
         index = len(steps) - 1
         while index > 0 and steps[index].stamp > target:
             index -= 1
+        return index
+
+    def estimate(self, target: int) -> np.ndarray:
+        """(models, 3, m) position, velocity and acceleration at the target stamp: smoothed over every
+        step kept after it, from the newest step <= target, carried forward to the target by the model."""
+        steps = self.steps
+        index = self._index(target)
         state = steps[-1].filtered
         at_step = target == steps[index].stamp
         if index < len(steps) - 1:
             if not self.smooth:  # the filtered state
                 state = steps[index].filtered
             elif at_step and self._unrolled is not None and index >= self._unrolled.skipped:
-                offsets, products = self._unrolled.at(index)
+                offsets, products, _ = self._unrolled.at(index)
                 return offsets + products @ state
             else:
                 for k in range(len(steps) - 2, index - 1, -1):
@@ -163,15 +180,47 @@ class KalmanTrack:
             state = transition @ state
         return self.models.readout @ state
 
-    def newest_acceleration(self) -> np.ndarray:
-        """Each model's acceleration of every joint at the newest sample (models, m): the filtered one."""
-        return (self.models.readout[:, 2:3] @ self.steps[-1].filtered)[:, 0]
-
-    def acceleration_variance(self) -> np.ndarray:
-        """Each model's acceleration variance at the newest sample (models,): the filter's, the same
-        for every joint of the group."""
+    def acceleration_variance(self, target: int) -> np.ndarray:
+        """Each model's variance of the acceleration :meth:`estimate` gives at the target (models,), the
+        same for every joint of the group: the smoothed one (the module docstring) where the target
+        has later steps and smoothing is on, interpolated in time between two steps; the filtered one
+        at its step otherwise, carried forward by the model to a target after it."""
+        steps = self.steps
+        index = self._index(target)
+        stamp = steps[index].stamp
+        if self.smooth and index < len(steps) - 1:
+            at = self._smoothed_variance(index)
+            if target <= stamp:
+                return at
+            later = self._smoothed_variance(index + 1)
+            return at + (target - stamp) / (steps[index + 1].stamp - stamp) * (later - at)
+        covariance = steps[index].covariance
         row = self.models.readout[:, 2:3]  # (models, 1, dim)
-        return (row @ self.steps[-1].covariance @ row.transpose(0, 2, 1))[:, 0, 0]
+        if target > stamp:
+            transition, noise, transposed = self.models.transition(interval(target, stamp))
+            covariance = transition @ covariance @ transposed + noise
+        return (row @ covariance @ row.transpose(0, 2, 1))[:, 0, 0]
+
+    def _smoothed_variance(self, index: int) -> np.ndarray:
+        """Each model's smoothed acceleration variance at the step ``index`` (models,): unrolled where
+        its row is kept, else going back step by step from the newest."""
+        steps = self.steps
+        newest = steps[-1].covariance
+        unrolled = self._unrolled
+        if unrolled is not None and index >= unrolled.skipped:
+            _, products, variances = unrolled.at(index)
+            row = products[:, 2:3]  # (models, 1, dim)
+            variance = variances + (row @ newest @ row.transpose(0, 2, 1))[:, 0, 0]
+        else:
+            covariance = newest
+            for k in range(len(steps) - 2, index - 1, -1):
+                step = steps[k]
+                assert step.gain is not None and step.settled is not None
+                covariance = step.settled + step.gain @ covariance @ step.gain.transpose(0, 2, 1)
+            row = self.models.readout[:, 2:3]
+            variance = (row @ covariance @ row.transpose(0, 2, 1))[:, 0, 0]
+        # sums of many terms: rounding can take a variance near 0 (noise-free samples) below it
+        return np.maximum(variance, 0.0)
 
     def forget_before(self, stamp: int) -> None:
         """Drop the steps no later estimate needs: all before the newest step at or before ``stamp``."""
@@ -191,26 +240,27 @@ class KalmanTrack:
             offset = None if step.offset is None else step.offset[:, :, columns]
             track.steps.append(
                 _Step(step.stamp, step.filtered[:, :, columns], step.predicted[:, :, columns], step.covariance,
-                      step.gain, offset)
+                      step.gain, offset, step.settled)
             )  # fmt: skip
         track._unrolled = None if self._unrolled is None else self._unrolled.select(columns)
         return track
 
 
 class _Unrolled:
-    """c_k (models, 3, m) and P_k (models, 3, dim) of the module docstring for the steps kept, in
-    buffers that grow by doubling: the steps are rows start .. end - 1, oldest first."""
+    """c_k (models, 3, m), P_k (models, 3, dim) and d_k (models,) of the module docstring for the steps
+    kept, in buffers that grow by doubling: the steps are rows start .. end - 1, oldest first."""
 
     def __init__(self, readout: np.ndarray, joints: int, capacity: int = 32) -> None:
         self.readout = readout  # (models, 3, dim)
         models, _, dim = readout.shape
         self.offsets = np.zeros((models, capacity, 3, joints))
         self.products = np.zeros((models, capacity, 3, dim))
+        self.variances = np.zeros((models, capacity))
         self.start = self.end = 0
         self.skipped = 0  # the oldest steps kept without a row (past UNROLLED)
 
     def append(self) -> None:
-        """A new newest step: c = 0, P = R."""
+        """A new newest step: c = 0, P = R, d = 0."""
         if self.end - self.start >= UNROLLED:
             self.start += 1
             self.skipped += 1
@@ -219,25 +269,31 @@ class _Unrolled:
             if 2 * kept > self.offsets.shape[1]:
                 self.offsets = np.concatenate([self.offsets, np.zeros_like(self.offsets)], axis=1)
                 self.products = np.concatenate([self.products, np.zeros_like(self.products)], axis=1)
+                self.variances = np.concatenate([self.variances, np.zeros_like(self.variances)], axis=1)
             self.offsets[:, :kept] = self.offsets[:, self.start : self.end]
             self.products[:, :kept] = self.products[:, self.start : self.end]
+            self.variances[:, :kept] = self.variances[:, self.start : self.end]
             self.start, self.end = 0, kept
         self.offsets[:, self.end] = 0.0
         self.products[:, self.end] = self.readout
+        self.variances[:, self.end] = 0.0
         self.end += 1
 
-    def advance(self, gain: np.ndarray, offset: np.ndarray) -> None:
-        """The newest step gets a successor: every c_k gains P_k o, every P_k becomes P_k G."""
+    def advance(self, gain: np.ndarray, offset: np.ndarray, settled: np.ndarray) -> None:
+        """The newest step gets a successor: every c_k gains P_k o, every d_k the acceleration row's
+        p_k E p_k^T (``settled`` E), every P_k becomes P_k G."""
         models, _, dim = self.readout.shape
         live = slice(self.start, self.end)
+        accelerations = self.products[:, live, 2]  # (models, kept, dim)
+        self.variances[:, live] += np.add.reduce((accelerations @ settled) * accelerations, axis=2)
         products = self.products[:, live].reshape(models, -1, dim)  # (models, kept * 3, dim)
         self.offsets[:, live] += (products @ offset).reshape(self.offsets[:, live].shape)
         self.products[:, live] = (products @ gain).reshape(models, -1, 3, dim)
 
-    def at(self, index: int) -> tuple[np.ndarray, np.ndarray]:
-        """(c, P) of the step ``index`` among those kept (at least :attr:`skipped`)."""
+    def at(self, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(c, P, d) of the step ``index`` among those kept (at least :attr:`skipped`)."""
         row = self.start + index - self.skipped
-        return self.offsets[:, row], self.products[:, row]
+        return self.offsets[:, row], self.products[:, row], self.variances[:, row]
 
     def forget(self, count: int) -> None:
         """The oldest ``count`` steps are dropped."""
@@ -249,5 +305,6 @@ class _Unrolled:
         unrolled = _Unrolled(self.readout, len(columns), self.offsets.shape[1])
         unrolled.offsets = self.offsets[..., columns]
         unrolled.products = self.products.copy()
+        unrolled.variances = self.variances.copy()
         unrolled.start, unrolled.end, unrolled.skipped = self.start, self.end, self.skipped
         return unrolled

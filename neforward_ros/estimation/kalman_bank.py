@@ -156,25 +156,20 @@ class KalmanBank:
             self._weights = weights / weights.sum(axis=0, keepdims=True)
         return self._weights
 
-    def estimate(self, target: int) -> np.ndarray:
-        """(3, m) position, velocity and acceleration at the target: the models' mixture."""
-        estimates = self.track.estimate(self._model_of(target))  # (M, 3, m)
+    def estimate(self, target: int) -> tuple[np.ndarray, np.ndarray]:
+        """(3, m) position, velocity and acceleration at the target, the models' mixture, and each
+        joint's acceleration standard deviation (m,): the mixture's (each model's variance of its
+        estimate there, smoothed for a fixed lag, and the spread of the models' estimates about the
+        mixture)."""
+        at = self._model_of(target)
+        estimates = self.track.estimate(at)  # (M, 3, m)
+        variances = self.track.acceleration_variance(at)[:, None]  # (M, 1)
         if len(estimates) == 1:
-            return estimates[0]
-        return np.add.reduce(self.weights()[:, None, :] * estimates, axis=0)
-
-    def acceleration_std(self) -> np.ndarray:
-        """Each joint's acceleration standard deviation at the newest sample: the mixture's (each
-        model's variance, and the spread of the models' estimates about the mixture)."""
-        if not self.steps:
-            return np.zeros(0)
-        estimates = self.track.newest_acceleration()  # (M, m)
-        variances = self.track.acceleration_variance()[:, None]
-        if len(estimates) == 1:
-            return np.sqrt(np.broadcast_to(variances[0], estimates.shape[1:]))
+            return estimates[0], np.sqrt(np.broadcast_to(variances[0], estimates.shape[2:]))
         weights = self.weights()
-        mean = np.add.reduce(weights * estimates, axis=0)
-        return np.sqrt(np.add.reduce(weights * (variances + (estimates - mean) ** 2), axis=0))
+        mixture = np.add.reduce(weights[:, None, :] * estimates, axis=0)
+        spread = estimates[:, 2] - mixture[2]
+        return mixture, np.sqrt(np.add.reduce(weights * (variances + spread * spread), axis=0))
 
     @property
     def nis(self) -> np.ndarray:

@@ -370,8 +370,10 @@ class StreamingEstimator:
         group.warming = False
         exact = age_ns == 0  # the target is a sample of this group: its own position is used as it is
         if group.track is not None:
-            position, velocity, acceleration = group.track.estimate(target)
-            state[members, 4] = group.track.acceleration_std()
+            (position, velocity, acceleration), spread = group.track.estimate(target)
+            # the model's variance, scaled up by how much larger than it expects the recent innovations
+            # are (covariance matching: a model whose noise is read too low, or that lags the motion)
+            state[members, 4] = spread * np.sqrt(np.maximum(self._innovations[members], 1.0))
         else:
             position, velocity, acceleration, spread = self._fit(target, group, exact)
             state[members, 4] = spread
