@@ -170,6 +170,23 @@ def test_the_stated_deviation_covers_the_chosen_windows_bias(
         assert 0.5 <= z <= 2.0, (seed, z)
 
 
+def _kalman_rms_z(mode: str, t: np.ndarray, q: np.ndarray, acceleration) -> float:
+    """RMS of (q'' error / stated sigma) of the kalman setting ``mode`` through the streaming
+    estimator, on samples q (T, 3) at t (s), against the true q'' ``acceleration(times)``, over the
+    estimates after the first second and before the last half."""
+    names = ["a", "b", "c"]
+    stamps = 1_700_000_000 * 10**9 + np.round(t * 1e9).astype(np.int64)
+    estimator = StreamingEstimator(names, settings=StreamSettings(method="kalman", mode=mode),
+                                   log=lambda level, message: None)  # fmt: skip
+    found = []
+    for k in range(len(t)):
+        found += estimator.update(int(stamps[k]), names, q[k].tolist())
+    ready = [e for e in found if e.all_ready and 1.0 < (e.stamp_ns - stamps[0]) / 1e9 + t[0] < t[-1] - 0.5]
+    times = np.array([(e.stamp_ns - stamps[0]) / 1e9 + t[0] for e in ready])
+    error = np.array([e.accelerations for e in ready]) - acceleration(times)
+    return float(np.sqrt(np.mean(np.square(error / np.array([e.acceleration_std for e in ready])))))
+
+
 @pytest.mark.parametrize("mode", ["fixed_lag", "causal"])
 @pytest.mark.parametrize(
     ("rate", "band", "bits", "noise"),
@@ -181,20 +198,9 @@ def test_the_kalman_settings_state_an_honest_deviation(mode: str, rate: float, b
     / sigma) within 0.5-2. The fixed-lag estimate is the smoothed one 20 ms back, whose variance is
     several times smaller than the newest sample's filtered one (stated before: RMS z 0.1-0.3, a sigma
     3-10x too cautious)."""
-    names = ["a", "b", "c"]
     for seed in (21, 22):
         t, q, acceleration = _sine_sums(np.random.default_rng(seed), rate, band, bits, noise)
-        stamps = 1_700_000_000 * 10**9 + np.round(t * 1e9).astype(np.int64)
-        estimator = StreamingEstimator(names, settings=StreamSettings(method="kalman", mode=mode),
-                                       log=lambda level, message: None)  # fmt: skip
-        found = []
-        for k in range(len(t)):
-            found += estimator.update(int(stamps[k]), names, q[k].tolist())
-        ready = [e for e in found if e.all_ready and 1.0 < (e.stamp_ns - stamps[0]) / 1e9 + t[0] < t[-1] - 0.5]
-        times = np.array([(e.stamp_ns - stamps[0]) / 1e9 + t[0] for e in ready])
-        error = np.array([e.accelerations for e in ready]) - acceleration(times)
-        sigma = np.array([e.acceleration_std for e in ready])
-        z = np.sqrt(np.mean(np.square(error / sigma)))
+        z = _kalman_rms_z(mode, t, q, acceleration)
         assert 0.5 <= z <= 2.0, (seed, z)
 
 
@@ -205,20 +211,10 @@ def test_the_kalman_deviation_grows_with_innovations_the_model_does_not_expect(m
     4-6 times their expected size, and the stated sigma is scaled up by them: RMS of (error / sigma)
     within 0.5-2 (without the scaling, 3-4)."""
     butter, lfilter = pytest.importorskip("scipy.signal").butter, pytest.importorskip("scipy.signal").lfilter
-    names = ["a", "b", "c"]
     b, a = butter(2, [20.0, 60.0], btype="band", fs=1000.0)
     for seed in (21, 22):
         rng = np.random.default_rng(seed)
         t, q, acceleration = _sine_sums(rng, 1000, 2.0, 0, 0.0)
         q = q + 2e-5 * lfilter(b, a, rng.normal(size=q.shape), axis=0) + rng.normal(0.0, 1e-6, q.shape)
-        stamps = 1_700_000_000 * 10**9 + np.round(t * 1e9).astype(np.int64)
-        estimator = StreamingEstimator(names, settings=StreamSettings(method="kalman", mode=mode),
-                                       log=lambda level, message: None)  # fmt: skip
-        found = []
-        for k in range(len(t)):
-            found += estimator.update(int(stamps[k]), names, q[k].tolist())
-        ready = [e for e in found if e.all_ready and 1.0 < (e.stamp_ns - stamps[0]) / 1e9 + t[0] < t[-1] - 0.5]
-        times = np.array([(e.stamp_ns - stamps[0]) / 1e9 + t[0] for e in ready])
-        error = np.array([e.accelerations for e in ready]) - acceleration(times)
-        z = np.sqrt(np.mean(np.square(error / np.array([e.acceleration_std for e in ready]))))
+        z = _kalman_rms_z(mode, t, q, acceleration)
         assert 0.5 <= z <= 2.0, (seed, z)
