@@ -218,20 +218,20 @@ static int fit_target(long count, const double *times, const double *values, lon
     if (lower == 0) valid_low = 0;
     long width = hi[0] - lo[0], rings = valid > valid_low ? valid : valid_low;
     double *scratch = malloc(sizeof(double) * (n + d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n
-                                               + (size_t)rings * n + 2 * (size_t)n));
+                                               + (size_t)rings * n + 2 * (size_t)n + (size_t)width));
     if (scratch == NULL) return 2;
     double *equal = scratch, *moments = equal + n, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
     double *out_low = fits_low + 5 * (size_t)valid_low * n;
     double *white = out_low + 5 * (size_t)n, *step = white + n, *spread = step + n;
     double *changes = spread + 4 * n;  /* after previous, candidate, alive: (rings, n) */
-    double *noise = changes + (size_t)rings * n, *noise_low = noise + n;
-    for (long l = 0; l < rings; l++)  /* each level's changes between consecutive samples */
-        for (long j = 0; j < n; j++) {
-            double count_changes = 0.0;
-            for (long i = lo[l]; i + 1 < hi[l]; i++)
-                if (values[(i + 1) * n + j] != values[i * n + j]) count_changes += 1.0;
-            changes[l * n + j] = count_changes;
-        }
+    double *noise = changes + (size_t)rings * n, *noise_low = noise + n, *changed = noise_low + n;
+    for (long j = 0; j < n; j++) {  /* each level's changes between consecutive samples (changes_within) */
+        changed[0] = 0.0;  /* the changes up to each sample of the largest window, which holds the others */
+        for (long i = 1; i < width; i++)
+            changed[i] = changed[i - 1] + (values[(lo[0] + i) * n + j] != values[(lo[0] + i - 1) * n + j]);
+        for (long l = 0; l < rings; l++)
+            changes[l * n + j] = hi[l] - 1 > lo[l] ? changed[hi[l] - 1 - lo[0]] - changed[lo[l] - lo[0]] : 0.0;
+    }
     /* the noise, from the largest window, every column at once (rows are contiguous): the samples'
        deviation, the mean |sixth difference|, the smallest non-zero step */
     const double *window = values + lo[0] * n;
