@@ -270,6 +270,8 @@ def _written_stamps(recording: Recording, start: int, stop: int, options: BagOpt
     is replayed through the node's estimator, as it would run. Judged as the node judges each joint
     group's history, from its start and after each gap longer than max_gap, over its first samples."""
     model, settings = recording.model, options.settings
+    if settings.estimator.method != "polyfit":
+        return False
     wrap = model.continuous_columns
     groups: dict[bytes, list[np.ndarray]] = {}
     for j, (rows, qs, _, _) in recording.columns.items():
