@@ -2,8 +2,7 @@
 base IMU, efforts, torques, wrenches, contact and world-frame states), what the node publishes for the
 recording's messages fed in their recording order and what ``neforward bag`` writes agree to 1e-9
 relative, stamp by stamp, on every topic; with the node's default estimator (the bag's
-whole-recording fit), with a replayed one (causal), and with the default on stamps written after the
-samples (the node fits on the recovered clock; the bag tool replays)."""
+whole-recording fit) and with a replayed one (causal)."""
 
 from __future__ import annotations
 
@@ -17,7 +16,6 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from neforward_ros import forward_recursion, load_model
 from neforward_ros.cli import main
 from neforward_ros.computation.base_motion import base_message
-from neforward_ros.estimation.clock import judged_written
 from neforward_ros.interface import topics
 from neforward_ros.node.pipeline import Pipeline
 from neforward_ros.parameters.settings import node_settings
@@ -53,28 +51,13 @@ def recording(tmp_path_factory) -> Path:
     """3 s of trotting: joint states at 500 Hz (jittered stamps, positions, velocities and efforts
     that swing over and under the contact thresholds; some messages repeat the one before under a new
     stamp) and the IMU at 400 Hz, in stamp order."""
-    return write_trot(tmp_path_factory.mktemp("agree") / "trot", written=False)
-
-
-@pytest.fixture(scope="module")
-def written_recording(tmp_path_factory) -> Path:
-    """The same trot, sampled on a steady 500 Hz clock and stamped when written, 0-40 % of a period
-    later: the node fits on the clock recovered from the stamps, and the bag tool replays it."""
-    return write_trot(tmp_path_factory.mktemp("agree") / "written", written=True)
-
-
-def write_trot(path: Path, written: bool) -> Path:
+    path = tmp_path_factory.mktemp("agree") / "trot"
     model = load_model(URDF)
     names = list(model.joint_names)
     rng = np.random.default_rng(3)
     count = 1500
-    if written:
-        sampled = np.arange(count) / 500.0
-        t = sampled + rng.uniform(0.0, 0.4, count) / 500.0
-    else:
-        sampled = t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
-    q, qd, _ = legs(sampled, model.joint_names)
-    assert judged_written(EPOCH + np.round(t * 1e9).astype(np.int64), q) == written
+    t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
+    q, qd, _ = legs(t, model.joint_names)
     efforts = 8.0 * np.sin(2 * np.pi * 0.7 * t[:, None] + np.arange(len(names))) + rng.normal(0, 0.05, q.shape)
     for first in range(40, count - 10, 41):  # a driver's repeated readings, runs of 1 to 3, under new stamps
         for i in range(first, first + 1 + first % 3):
@@ -153,13 +136,8 @@ def numbers(contents) -> list[float]:
     return []
 
 
-@pytest.mark.parametrize(
-    "flags, stamps",
-    [([], "sampled"), (["-p", "estimator.mode:=causal"], "sampled"), ([], "written")],
-    ids=["default", "causal", "default-written-stamps"],
-)
-def test_the_node_and_the_bag_tool_agree_stamp_by_stamp(request, tmp_path, flags, stamps) -> None:
-    recording = request.getfixturevalue("recording" if stamps == "sampled" else "written_recording")
+@pytest.mark.parametrize("flags", [[], ["-p", "estimator.mode:=causal"]], ids=["default", "causal"])
+def test_the_node_and_the_bag_tool_agree_stamp_by_stamp(recording, tmp_path, flags) -> None:
     parameters = {"estimator.mode": "causal"} if flags else {}
     node = node_outputs(recording, parameters)
     bag = bag_outputs(recording, tmp_path / "out", flags)

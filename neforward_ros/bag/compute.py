@@ -28,7 +28,6 @@ from neforward_ros.computation.observer import RawStates
 from neforward_ros.computation.raw_samples import RawAssembler
 from neforward_ros.computation.result import Observation, Result
 from neforward_ros.estimation.batch import estimate_at
-from neforward_ros.estimation.clock import judged_written
 from neforward_ros.estimation.coverage import covered_mask
 from neforward_ros.estimation.repeats import repeated
 from neforward_ros.model import RobotModel
@@ -76,7 +75,7 @@ def prepare_inputs(recording: Recording, options: BagOptions, progress: Callable
         segment_stamps = recording.stamps[start:stop]
         segment = Segment(int(segment_stamps.min()), int(segment_stamps.max()), stop - start)
         recording.report.segments.append(segment)
-        if options.streamed or _written_stamps(recording, start, stop, options):
+        if options.streamed:
             states, log_times, base, absent = _replayed(recording, start, stop, options)
         else:
             states, log_times, absent = _whole(recording, start, stop, options)
@@ -262,34 +261,6 @@ def _whole(
     states = JointStates(targets, *np.where(ready, state, 0.0), ready, silent, efforts, spread)
     states = with_held(states, held_joints(recording, settings))
     return states, recording.log_times[start:stop][first], sorted(set(absent))
-
-
-def _written_stamps(recording: Recording, start: int, stop: int, options: BagOptions) -> bool:
-    """Whether the node would take a segment's stamps for write times and fit its samples on the
-    clock recovered from them (:class:`~neforward_ros.estimation.clock.FitTimes`): then the segment
-    is replayed through the node's estimator, as it would run. Judged as the node judges each joint
-    group's history, from its start and after each gap longer than max_gap, over its first samples."""
-    model, settings = recording.model, options.settings
-    if settings.estimator.method != "polyfit":
-        return False
-    wrap = model.continuous_columns
-    groups: dict[bytes, list[np.ndarray]] = {}
-    for j, (rows, qs, _, _) in recording.columns.items():
-        inside = (rows >= start) & (rows < stop) & np.isfinite(qs)
-        t_ns, keep = np.unique(recording.stamps[rows[inside]], return_index=True)
-        q = qs[inside][keep]
-        groups.setdefault(t_ns.tobytes(), []).append(np.unwrap(q) if wrap[j] else q)
-    for t_bytes, columns in groups.items():
-        t_ns = np.frombuffer(t_bytes, dtype=np.int64)
-        q = np.stack(columns, axis=1)
-        gap = np.r_[False, np.diff(t_ns) > settings.estimator.max_gap * NS]
-        fresh = ~repeated(q, gap)
-        pieces = np.cumsum(gap)[fresh]
-        t_ns, q = t_ns[fresh], q[fresh]
-        for piece in np.unique(pieces):
-            if judged_written(t_ns[pieces == piece], q[pieces == piece]):
-                return True
-    return False
 
 
 def _with_base(

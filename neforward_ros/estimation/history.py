@@ -6,7 +6,6 @@ from collections import deque
 
 import numpy as np
 
-from neforward_ros.estimation.clock import FitTimes
 from neforward_ros.estimation.kalman_bank import KalmanBank
 from neforward_ros.estimation.repeats import MOST_REPEATS, MOVING_STEPS, moving
 from neforward_ros.stamps import NS
@@ -19,14 +18,11 @@ class JointHistory:
     Attributes:
         joints: the joints' indices in the estimator, in the order of the buffer's columns.
         origin: the segment's first stamp; ``seconds`` are counted from it.
-        times: without a Kalman track, the times the samples are fitted at (:class:`.clock.FitTimes`):
-            their stamps, or the clock recovered from them where they are write times.
     """
 
     __slots__ = (
         "_efforts",
         "_positions",
-        "_recovered",
         "_seconds",
         "_stamps",
         "_velocities",
@@ -42,7 +38,6 @@ class JointHistory:
         "repeated",
         "slots",
         "start",
-        "times",
         "track",
         "warming",
     )
@@ -50,7 +45,6 @@ class JointHistory:
     def __init__(self, joints: list[int], origin: int, capacity: int = 256, track: KalmanBank | None = None) -> None:
         self.joints = joints
         self.track = track
-        self.times = FitTimes() if track is None else None
         self.holes: list[int] = []  # stamps of samples more than the support's max_hole after the previous one
         self.intervals: deque[int] = deque(maxlen=8)  # the last intervals between samples, ns
         self.warming: bool | str = False  # whether the current warm-up has been logged ("sparse": warned)
@@ -58,7 +52,6 @@ class JointHistory:
         self.origin = origin
         self._stamps = np.empty(capacity, dtype=np.int64)
         self._seconds = np.empty(capacity)
-        self._recovered = np.empty(capacity, dtype=np.int64)  # ns, from ``times``
         self._positions = np.empty((capacity, len(joints)))
         self._velocities = np.empty((capacity, len(joints)))
         self._efforts = np.empty((capacity, len(joints)))
@@ -81,22 +74,6 @@ class JointHistory:
     def seconds(self) -> np.ndarray:
         """The stamps as seconds since the segment's first stamp."""
         return self._seconds[self.start : self.end]
-
-    @property
-    def fit_seconds(self) -> np.ndarray:
-        """The samples' times for the fits, seconds since the segment's first stamp: the stamps, or the
-        recovered clock once the stamps are found to be write times (:class:`.clock.FitTimes`)."""
-        if self.times is None or not self.times.written:
-            return self.seconds
-        return (self._recovered[self.start : self.end] - self.origin) / NS
-
-    def fit_time(self, target: int) -> float:
-        """A stamp (ns) on the fits' clock (:attr:`fit_seconds`), s: the recovered time of the newest
-        sample at or before it plus the time since (of the first sample, before it)."""
-        if self.times is None or not self.times.written:
-            return (target - self.origin) / NS
-        k = max(int(self.stamps.searchsorted(target, side="right")) - 1, 0) + self.start
-        return (int(self._recovered[k]) + target - int(self._stamps[k]) - self.origin) / NS
 
     @property
     def positions(self) -> np.ndarray:
@@ -150,7 +127,7 @@ class JointHistory:
     ) -> None:
         if self.end == len(self._stamps):
             count = len(self)
-            arrays = ("_stamps", "_seconds", "_recovered", "_positions", "_velocities", "_efforts")
+            arrays = ("_stamps", "_seconds", "_positions", "_velocities", "_efforts")
             if count > len(self._stamps) // 2:
                 for name in arrays:
                     old = getattr(self, name)
@@ -172,8 +149,6 @@ class JointHistory:
         self._positions[end] = positions
         self._velocities[end] = velocities
         self._efforts[end] = efforts
-        if self.times is not None:
-            self._recovered[end] = self.times.add(stamp_ns, self._positions[end])
         if not self.any_effort and any(e == e for e in efforts):  # not all NaN
             self.any_effort = True
         if all(v != v for v in velocities):  # all NaN
@@ -200,8 +175,6 @@ class JointHistory:
         count = len(self)
         moved._stamps[:count] = self.stamps
         moved._seconds[:count] = self.seconds
-        moved._recovered[:count] = self._recovered[self.start : self.end]
-        moved.times = None if self.times is None else self.times.copy()
         moved._positions[:count] = self.positions[:, columns]
         moved._velocities[:count] = self.velocities[:, columns]
         moved._efforts[:count] = self.efforts[:, columns]

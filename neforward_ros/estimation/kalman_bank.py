@@ -21,7 +21,7 @@ changes), white noise over the last :data:`NOISE_WINDOW` samples, read again eve
 :data:`NOISE_EVERY` samples; the velocity noise likewise from the velocities the messages carry.
 
 The position noise is read on the stamps and on the clock recovered from them as if they were write
-times (:mod:`.clock`): where the latter reads far less (:func:`.clock.written`), the driver stamps its
+times (:mod:`.clock`): where the latter reads far less (:data:`WRITTEN`), the driver stamps its
 messages when it writes them, and the filters run on the recovered clock from then on (estimates and
 their stamps stay the messages'). A driver's write delays would otherwise read as noise that follows
 the velocity: 26 times the error on 20 ms, 41 times causal (``bench/bench_write_jitter.py``).
@@ -35,7 +35,7 @@ from collections import deque
 import numpy as np
 
 from neforward_ros.estimation.adaptive import noise_of
-from neforward_ros.estimation.clock import WriteClock, written
+from neforward_ros.estimation.clock import WriteClock
 from neforward_ros.estimation.kalman import KalmanTrack
 from neforward_ros.estimation.motion import TICK_NS, KalmanSettings, MotionModel, MotionModels
 from neforward_ros.stamps import NS
@@ -57,6 +57,12 @@ NOISE_FLOOR = 1e-2
 variances are 1e2, a noise of 1e-8 rad would be 1e-16) and diverges."""
 FALLBACK_VELOCITY_NOISE = 1e-3
 """rad/s (m/s): likewise for the velocities."""
+WRITTEN = 0.5
+"""The most the position noise read on the recovered clock (:mod:`.clock`) may be, relative to that
+read on the stamps, for the stamps to be taken for write times: then, and from then on, the filter
+runs on the recovered clock. Where the stamps are the sample times, the recovered clock moves samples
+off them and its noise reads higher; where they are write times, several times lower
+(``bench/bench_write_jitter.py``)."""
 CHECK_EVERY = 4
 """Readings of the position noise between two checks of the recovered clock."""
 
@@ -214,7 +220,7 @@ class KalmanBank:
                 the start say nothing of the noise and are left out of the median (with them, a group whose
                 other joints still rest would take a noise of zero and trust every sample beyond measure). Once
         the window is full, read every :data:`NOISE_EVERY` samples. The positions' noise is also read on
-        the recovered clock until the stamps are found to be write times (:func:`.clock.written`), and only
+        the recovered clock until the stamps are found to be write times (:data:`WRITTEN`), and only
         there once they are."""
         if len(samples) < NOISE_WINDOW:
             known = self.known_noise.get(kind)
@@ -231,9 +237,10 @@ class KalmanBank:
         white, step = noise_of(times, values, coloured=False)
         if kind == "positions" and not self.written:
             self._reads += 1
-            if self._reads % CHECK_EVERY == 1:
+            moving = white > fallback * NOISE_FLOOR
+            if moving.any() and self._reads % CHECK_EVERY == 1:
                 on_clock, _ = noise_of(np.array([r for _, r, _ in samples]), values, coloured=False)
-                if written(white, on_clock, fallback * NOISE_FLOOR):
+                if np.median(on_clock[moving]) < WRITTEN * np.median(white[moving]):
                     self.written = True
                     white = on_clock
         seen = self._steps.get(kind)

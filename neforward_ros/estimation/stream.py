@@ -398,8 +398,8 @@ class StreamingEstimator:
         if group.velocities_everywhere_after(lo):
             by_velocity = np.isfinite(velocities).all(axis=0)
         fitted_velocities = bool(by_velocity.any())
-        times = group.fit_seconds[lo:hi]
-        target_s = group.fit_time(target)
+        times = group.seconds[lo:hi]
+        target_s = (target - self._origin) / NS
         if fitted_velocities and exact:
             # One column per joint: its velocities where it has them all, else its positions.
             values = np.where(by_velocity, velocities, positions)
