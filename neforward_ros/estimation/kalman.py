@@ -195,11 +195,10 @@ class KalmanTrack:
             later = self._smoothed_variance(index + 1)
             return at + (target - stamp) / (steps[index + 1].stamp - stamp) * (later - at)
         covariance = steps[index].covariance
-        row = self.models.readout[:, 2:3]  # (models, 1, dim)
         if target > stamp:
             transition, noise, transposed = self.models.transition(interval(target, stamp))
             covariance = transition @ covariance @ transposed + noise
-        return (row @ covariance @ row.transpose(0, 2, 1))[:, 0, 0]
+        return _row_variance(self.models.readout, covariance)
 
     def _smoothed_variance(self, index: int) -> np.ndarray:
         """Each model's smoothed acceleration variance at the step ``index`` (models,): unrolled where
@@ -209,16 +208,14 @@ class KalmanTrack:
         unrolled = self._unrolled
         if unrolled is not None and index >= unrolled.skipped:
             _, products, variances = unrolled.at(index)
-            row = products[:, 2:3]  # (models, 1, dim)
-            variance = variances + (row @ newest @ row.transpose(0, 2, 1))[:, 0, 0]
+            variance = variances + _row_variance(products, newest)
         else:
             covariance = newest
             for k in range(len(steps) - 2, index - 1, -1):
                 step = steps[k]
                 assert step.gain is not None and step.settled is not None
                 covariance = step.settled + step.gain @ covariance @ step.gain.transpose(0, 2, 1)
-            row = self.models.readout[:, 2:3]
-            variance = (row @ covariance @ row.transpose(0, 2, 1))[:, 0, 0]
+            variance = _row_variance(self.models.readout, covariance)
         # sums of many terms: rounding can take a variance near 0 (noise-free samples) below it
         return np.maximum(variance, 0.0)
 
@@ -244,6 +241,13 @@ class KalmanTrack:
             )  # fmt: skip
         track._unrolled = None if self._unrolled is None else self._unrolled.select(columns)
         return track
+
+
+def _row_variance(rows: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    """Each model's variance (models,) of the acceleration read by ``rows`` (models, 3, dim), whose
+    third row reads it, from a state of ``covariance`` (models, dim, dim)."""
+    row = rows[:, 2:3]  # (models, 1, dim)
+    return (row @ covariance @ row.transpose(0, 2, 1))[:, 0, 0]
 
 
 class _Unrolled:
