@@ -372,7 +372,9 @@ def test_batched_and_single_messages_in_the_same_chunks_read_back_in_order_throu
                 rows = np.stack(
                     [np.frombuffer(cdr.encode(kind, {"data": float(t + connection.id)}), np.uint8) for t in times]
                 )
-                streams.append((connection, rows))
+                streams.append(
+                    (connection, rows.shape[1], lambda part, out, rows=rows: out.__setitem__(..., rows[part]))
+                )
                 sent[connection.topic] += [(int(t), bytes(r)) for t, r in zip(times, rows, strict=True)]
             assert bag_write._write_rows_mcap(writer, streams, times)
             stamp = int(times[-1]) + 1000

@@ -34,7 +34,7 @@ from neforward_ros.model import RobotModel
 from neforward_ros.parameters.settings import NodeSettings
 from neforward_ros.stamps import NS
 
-CHUNK = 8192
+CHUNK = 4096
 """Samples per batched computation: bounds the memory of every later stage at a few MB per link."""
 
 

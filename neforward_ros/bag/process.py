@@ -101,7 +101,6 @@ def process_bag(
             f"robot {model.name!r} has a floating base (joint {model.floating_base!r}) but no base source was "
             "given: its root link was taken to be at rest (--base imu or --base odometry for a moving base)"
         )
-    inputs = prepare_inputs(recording, options, progress)
     report = recording.report
     # Every output is written under a temporary name and all are moved into place together at the
     # end: an error or an interrupt leaves none of them, and nothing half-written.
@@ -109,6 +108,8 @@ def process_bag(
     recording_writer: RecordingWriter | None = None
     try:
         recording_writer = RecordingWriter(output, options, model)
+        recording_writer.reserve(len(recording.stamps))  # allocated by the writing thread meanwhile
+        inputs = prepare_inputs(recording, options, progress)
         csv = None
         if csv_path is not None:
             partials.append(_partial(Path(csv_path)))

@@ -5,13 +5,15 @@ from __future__ import annotations
 import functools
 import os
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from neforward_ros.bag.background_file import BackgroundFile
 from neforward_ros.bag.options import BagOptions
-from neforward_ros.computation.result import Observation, Result
+from neforward_ros.computation.result import Observation, Result, make_result
 from neforward_ros.interface import encoder
 from neforward_ros.interface.messages import (
     dynamics_messages,
@@ -21,6 +23,7 @@ from neforward_ros.interface.messages import (
 )
 from neforward_ros.interface.names import NodeNames
 from neforward_ros.interface.topics import COM_STATES, LINK_STATES, WORLD_LINK_STATES, output_list
+from neforward_ros.kinematics.forward_kernel import ROW
 from neforward_ros.model import RobotModel
 from neforward_ros.wire import cdr
 from neforward_ros.wire.rostypes import facts
@@ -76,6 +79,8 @@ class RecordingWriter:
         try:  # until the caller holds this writer, an error or a Ctrl-C here is this writer's to clean up
             self.writer = Writer(self.path, version=9, storage_plugin=storage)
             self.writer.open()
+            if options.storage == "mcap" and fast_mcap_allowed():  # the file written by a thread of its own
+                self.writer.storage.bio = BackgroundFile(self.writer.storage.bio)
             self.connections = {
                 topic: self.writer.add_connection(
                     topic, kind, msgdef=facts(kind)["msgdef"], rihs01=facts(kind)["rihs01"]
@@ -86,8 +91,21 @@ class RecordingWriter:
             shutil.rmtree(self.staging, ignore_errors=True)
             raise
         self.topics = [topic for topic, _ in output_topics(options)]
+        self.model = model
         self._templates = encoder.Templates(settings.frame_prefix)
         self._multi_dof = [self.connections[self.names.resolve(topic)] for topic in (LINK_STATES, COM_STATES)]
+
+    def reserve(self, stamps: int) -> None:
+        """Have the storage file allocated ahead for link_states and com_states at ``stamps`` stamps, while
+        the estimates are computed (on a tmpfs the allocation is most of the writing); only a hint, for
+        the MCAP file written by its own thread."""
+        bio = getattr(getattr(self.writer, "storage", None), "bio", None)
+        if not isinstance(bio, BackgroundFile):
+            return
+        model = self.model
+        blank = make_result(model, 0, np.zeros((len(model.link_names), ROW)))
+        # Per stamp and topic: the message's record (31 bytes and the message) and its index entry (16).
+        bio.reserve(stamps * sum(31 + len(template.template) + 16 for template in self._templates(blank)))
 
     def write(self, result: Result, log_times: np.ndarray) -> None:
         """One chunk of results, each recorded at its joint state's recording time; samples where only
@@ -99,19 +117,23 @@ class RecordingWriter:
         options, names = self.options, self.names
         settings = options.settings
         prefix = settings.frame_prefix
-        streams = [
-            (connection, template.encode_many(result.stamp_ns, *blocks))
-            for connection, template, blocks in zip(
-                self._multi_dof, self._templates(result), result.blocks, strict=True
-            )
-        ]
+        messages = list(zip(self._multi_dof, self._templates(result), result.blocks, strict=True))
         world = settings.world_states
         per_sample = bool(
             settings.accel_links or settings.imu_links or options.dynamics_needed or world
             or settings.publish_joint_estimates
         )  # fmt: skip
-        if not per_sample and _FAST_MCAP and fast_mcap_allowed() and _write_rows_mcap(self.writer, streams, log_times):
-            return
+        if not per_sample and _FAST_MCAP and fast_mcap_allowed():
+            stamps = result.stamp_ns
+            rows = [
+                (connection, len(template.template), _encoder(template, stamps, blocks))
+                for connection, template, blocks in messages
+            ]
+            if _write_rows_mcap(self.writer, rows, log_times):
+                return
+        streams = [
+            (connection, template.encode_many(result.stamp_ns, *blocks)) for connection, template, blocks in messages
+        ]
         times = log_times.tolist()
         flat = [(connection, memoryview(data.reshape(-1)), data.shape[1]) for connection, data in streams]
         for i, log_time in enumerate(times):
@@ -178,9 +200,23 @@ def fast_mcap_allowed() -> bool:
 _CHUNK_BYTES = 2**20  # as rosbags' MCAP writer
 
 
-def _write_rows_mcap(writer: Any, streams: list[tuple[Any, np.ndarray]], log_times: np.ndarray) -> bool:
-    """Write equal-length messages straight into rosbags' MCAP chunks, many at a time (only for the
-    rosbags releases in :data:`FAST_MCAP_ROSBAGS`).
+Rows = Callable[[slice, np.ndarray], None]
+"""Writes the messages of a slice of the stamps into the rows of bytes it is given (one per stamp)."""
+
+
+def _encoder(template: cdr.MultiDofTemplate, stamps_ns: np.ndarray, blocks: tuple[np.ndarray, ...]) -> Rows:
+    """The MultiDOF messages of ``template`` with these stamps and blocks (see ``encode_many``)."""
+
+    def encode(part: slice, out: np.ndarray) -> None:
+        template.encode_many(stamps_ns[part], *(b[part] for b in blocks), out=out)
+
+    return encode
+
+
+def _write_rows_mcap(writer: Any, messages: list[tuple[Any, int, Rows]], log_times: np.ndarray) -> bool:
+    """Write messages of one size per topic, (connection, size in bytes, what writes them), one of each
+    at every recording time, straight into rosbags' MCAP chunks, many at a time (only for the rosbags
+    releases in :data:`FAST_MCAP_ROSBAGS`): each message is written into its record's bytes.
 
     Produces what rosbags' ``Writer.write`` produces message by message (message records of
     opcode 0x05 with channel id, sequence 0, log and publish time, data; the chunk's message
@@ -201,30 +237,30 @@ def _write_rows_mcap(writer: Any, streams: list[tuple[Any, np.ndarray]], log_tim
     if not needed:
         return False
     fields = []
-    for k, (_, data) in enumerate(streams):
+    for k, (_, size, _) in enumerate(messages):
         fields += [(f"op{k}", "u1"), (f"length{k}", "<u8"), (f"channel{k}", "<u2"), (f"sequence{k}", "<u4")]
-        fields += [(f"log{k}", "<u8"), (f"publish{k}", "<u8"), (f"data{k}", "u1", (data.shape[1],))]
+        fields += [(f"log{k}", "<u8"), (f"publish{k}", "<u8"), (f"data{k}", "u1", (size,))]
     record = np.dtype(fields)
-    starts = [record.fields[f"op{k}"][1] for k in range(len(streams))]
+    starts = [record.fields[f"op{k}"][1] for k in range(len(messages))]
     count = len(log_times)
     per_chunk = max(1, _CHUNK_BYTES // record.itemsize)
     for first in range(0, count, per_chunk):
         part = slice(first, min(count, first + per_chunk))
         times = np.asarray(log_times[part], dtype=np.int64)
         block = np.empty(len(times), dtype=record)
-        for k, (connection, data) in enumerate(streams):
+        for k, (connection, size, write_rows) in enumerate(messages):
             block[f"op{k}"] = 0x05
-            block[f"length{k}"] = 2 + 4 + 8 + 8 + data.shape[1]
+            block[f"length{k}"] = 2 + 4 + 8 + 8 + size
             block[f"channel{k}"] = connection.id
             block[f"sequence{k}"] = 0
             block[f"log{k}"] = times
             block[f"publish{k}"] = times
-            block[f"data{k}"] = data[part]
+            write_rows(part, block[f"data{k}"])
         chunk = storage.chunk
         base = chunk.bio.tell()
-        chunk.bio.write(block.tobytes())
+        chunk.bio.write(block.view(np.uint8))
         offsets = base + np.arange(len(times), dtype=np.int64) * record.itemsize
-        for k, (connection, _) in enumerate(streams):
+        for k, (connection, _, _) in enumerate(messages):
             index = chunk.msgs.get(connection.id)
             if not isinstance(index, _ArrayIndex):
                 index = chunk.msgs[connection.id] = _ArrayIndex(index or ())
@@ -293,7 +329,7 @@ def _close_chunk(storage: Any) -> None:
     bio = storage.bio
     chunk_start = bio.tell()
     bio.write(b"\x06" + (len(body) + size).to_bytes(8, "little") + body)
-    bio.write(data)
+    getattr(bio, "hand_over", bio.write)(data)  # the chunk's buffer, not written to again
     del data
     chunk_end = bio.tell()
     offsets: list[tuple[int, int]] = []

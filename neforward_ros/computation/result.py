@@ -275,28 +275,28 @@ def make_result(model: RobotModel, stamp_ns: Any, table: np.ndarray, determined:
     return replace(result, determined=determined)
 
 
-# Columns of the recursion's rows (kernel.SLICES) that the two MultiDOF messages take.
-_ROTATED = ("velocity", "omega", "accel", "alpha", "com_velocity", "com_accel")
-_ROTATED_COLUMNS = np.concatenate([np.arange(SLICES[name].start, SLICES[name].stop) for name in _ROTATED])
-_LINK_POSE = np.r_[SLICES["position"], SLICES["orientation"]]
-_COM_POSE = np.r_[SLICES["com_position"], SLICES["orientation"]]
-_COM_VELOCITIES = np.r_[12:15, 3:6]  # of the 18 rotated numbers: com_velocity, omega
-_COM_ACCELERATIONS = np.r_[15:18, 9:12]  # com_accel, alpha
+def _between(first: str, last: str) -> slice:
+    """The columns of the recursion's rows (kernel.SLICES) from field ``first`` to field ``last``."""
+    return slice(SLICES[first].start, SLICES[last].stop)
+
+
+# The blocks of the two MultiDOF messages: each a slice of the kernel's row.
+_LINK_POSE = _between("position", "orientation")
+_COM_POSE = _between("com_position", "com_orientation")
+_LINK_VELOCITIES = _between("velocity_in_root", "omega_in_root")
+_LINK_ACCELERATIONS = _between("accel_in_root", "alpha_in_root")
+_COM_VELOCITIES = _between("com_velocity_in_root", "com_omega_in_root")
+_COM_ACCELERATIONS = _between("com_accel_in_root", "com_alpha_in_root")
 
 Blocks = tuple[np.ndarray, np.ndarray, np.ndarray]
 
 
 def state_blocks(table: np.ndarray) -> tuple[Blocks, Blocks]:
-    """The numbers of link_states and of com_states, in one pass over the recursion's rows ((n, ROW) or
+    """The numbers of link_states and of com_states from the recursion's rows ((n, ROW) or
     (T, n, ROW)): for each, transforms (..., n, 7) = translation, rotation (x, y, z, w; w >= 0, as the
     kernel gives it); velocities (..., n, 6) = linear, angular; accelerations likewise, every vector
-    along the root axes (the six vectors of every link rotated by one matmul)."""
-    leading = table.shape[:-1]
-    rotation = table[..., SLICES["rotation"]].reshape(*leading, 3, 3)
-    vectors = table[..., _ROTATED_COLUMNS].reshape(*leading, 6, 3)
-    rotated = np.matmul(vectors, np.swapaxes(rotation, -1, -2)).reshape(*leading, 18)  # rows (R v)^T
-    link_pose, com_pose = table[..., _LINK_POSE], table[..., _COM_POSE]
+    along the root axes (as the kernel gives them: ``*_in_root``); views of the rows."""
     return (
-        (link_pose, rotated[..., 0:6], rotated[..., 6:12]),
-        (com_pose, rotated[..., _COM_VELOCITIES], rotated[..., _COM_ACCELERATIONS]),
+        (table[..., _LINK_POSE], table[..., _LINK_VELOCITIES], table[..., _LINK_ACCELERATIONS]),
+        (table[..., _COM_POSE], table[..., _COM_VELOCITIES], table[..., _COM_ACCELERATIONS]),
     )

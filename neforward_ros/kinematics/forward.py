@@ -29,7 +29,7 @@ import math
 import struct
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -130,9 +130,10 @@ class LinkKinematics:
     @classmethod
     def from_table(cls, link_names: tuple[str, ...], table: np.ndarray) -> LinkKinematics:
         """Views into a table of the kernel's rows, (..., n_links, ROW)."""
-        fields = {name: table[..., part] for name, part in SLICES.items()}
-        fields["rotation"] = fields["rotation"].reshape((*table.shape[:-1], 3, 3))
-        return cls(link_names=link_names, **fields)  # the kernel gives orientations with w >= 0
+        own = {field.name for field in fields(cls)}
+        views = {name: table[..., part] for name, part in SLICES.items() if name in own}
+        views["rotation"] = views["rotation"].reshape((*table.shape[:-1], 3, 3))
+        return cls(link_names=link_names, **views)  # the kernel gives orientations with w >= 0
 
     def in_root(self) -> LinkKinematics:
         """The same kinematics with omega, alpha, velocity, accel, com_accel and com_velocity in root axes.

@@ -28,13 +28,35 @@ FIELDS = (
     ("velocity", 3),  # linear velocity of the origin, link frame
     ("accel", 3),  # specific force at the origin, link frame
     ("rotation", 9),  # link -> root, row-major
-    ("position", 3),  # origin in the root frame
     ("com_accel", 3),  # specific force at the centre of mass, link frame
     ("com_velocity", 3),  # linear velocity of the centre of mass, link frame
-    ("com_position", 3),  # centre of mass in the root frame
+    ("position", 3),  # origin in the root frame
     ("orientation", 4),  # link -> root as a unit quaternion (x, y, z, w), w >= 0
+    ("com_position", 3),  # centre of mass in the root frame
+    ("com_orientation", 4),  # = orientation (so that each pose is 7 numbers in a row)
+    # The link-frame vectors along the root axes (rotation @ vector), in the order of the MultiDOF
+    # messages' twists and accelerations (linear, angular), the angular ones repeated for the centre
+    # of mass: every block of link_states and com_states is a slice of the row.
+    ("velocity_in_root", 3),
+    ("omega_in_root", 3),
+    ("accel_in_root", 3),
+    ("alpha_in_root", 3),
+    ("com_velocity_in_root", 3),
+    ("com_omega_in_root", 3),  # = omega_in_root
+    ("com_accel_in_root", 3),
+    ("com_alpha_in_root", 3),  # = alpha_in_root
 )
 """The numbers of each link's row, in order."""
+
+IN_ROOT = ("velocity", "omega", "accel", "alpha", "com_velocity", "com_accel")
+"""The link-frame vectors the row also gives along the root axes (``<name>_in_root``)."""
+
+REPEATED = {
+    "com_orientation": "orientation",
+    "com_omega_in_root": "omega_in_root",
+    "com_alpha_in_root": "alpha_in_root",
+}
+"""Numbers the row gives twice: field -> the field it repeats."""
 
 SLICES = {}
 _start = 0
@@ -79,9 +101,13 @@ def kernel_source(model: RobotModel) -> str:
         state.update(com_motion(em, state, rc))
         com = mat_vec(em, state["rotation"], rc)
         state["com_position"] = tuple(em.add(state["position"][i], com[i]) for i in range(3))
+        for name in IN_ROOT:
+            state[f"{name}_in_root"] = mat_vec(em, state["rotation"], state[name])
         states.append(state)
+        row = dict(state, orientation=_canonical(em, state["orientation"]))
+        row.update({name: row[repeated] for name, repeated in REPEATED.items()})
         for name, _ in FIELDS:
-            outputs.extend(_canonical(em, state[name]) if name == "orientation" else state[name])
+            outputs.extend(row[name])
     values = ", ".join(repr(float(v)) if not isinstance(v, str) else v for v in outputs)
     body = finish([*lines, f"    return ({values},)"])
     return "def kernel(q, qd, qdd, root, sin, cos, copysign):\n" + "\n".join(body) + "\n"

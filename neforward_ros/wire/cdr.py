@@ -428,24 +428,37 @@ class MultiDofTemplate:
         return bytes(buffer)
 
     def encode_many(
-        self, stamps_ns: np.ndarray, transforms: np.ndarray, velocities: np.ndarray, accelerations: np.ndarray
+        self,
+        stamps_ns: np.ndarray,
+        transforms: np.ndarray,
+        velocities: np.ndarray,
+        accelerations: np.ndarray,
+        out: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Many messages at once: one row of bytes per stamp, (T,), (T, n, 7), (T, n, 6), (T, n, 6)."""
+        """Many messages at once: one row of bytes per stamp, (T,), (T, n, 7), (T, n, 6), (T, n, 6);
+        written into ``out`` when given ((T, size) uint8 whose rows may lie apart, as the data of
+        records), else into a new array."""
         count = len(stamps_ns)
-        out = np.tile(np.frombuffer(self.template, dtype=np.uint8), (count, 1))
+        size = len(self.template)
+        if out is None:
+            out = np.empty((count, size), dtype=np.uint8)
+        elif out.shape != (count, size) or out.dtype != np.uint8 or out.strides[-1] != 1:
+            raise ValueError(f"out {out.shape} {out.dtype}: expected ({count}, {size}) uint8 rows")
+        out[:] = np.frombuffer(self.template, dtype=np.uint8)
         stamps = np.asarray(stamps_ns, dtype=np.int64)
         sec, nanosec = np.divmod(stamps, 1_000_000_000)
         if count and (sec.min() < -(2**31) or sec.max() >= 2**31):
             raise InputError("a stamp is outside the range of builtin_interfaces/Time (int32 seconds)")
-        out[:, 4:8] = sec.astype("<i4").view(np.uint8).reshape(count, 4)
-        out[:, 8:12] = nanosec.astype("<u4").view(np.uint8).reshape(count, 4)
+        out[:, 4:8].view("<i4")[:, 0] = sec
+        out[:, 8:12].view("<u4")[:, 0] = nanosec
         for offset, shape, values in zip(
             self.offsets, self.shapes, (transforms, velocities, accelerations), strict=True
         ):
             if values.shape != (count, *shape):
                 raise InputError(f"MultiDOFJointTrajectory blocks of shape {values.shape}, expected {(count, *shape)}")
             size = 8 * shape[0] * shape[1]
-            out[:, offset : offset + size] = (
-                np.ascontiguousarray(values, dtype="<f8").view(np.uint8).reshape(count, size)
-            )
+            # The numbers straight into each row's bytes (an unaligned view of them as doubles, rows apart).
+            numbers = out[:, offset : offset + size].view("<f8")
+            numbers = np.lib.stride_tricks.as_strided(numbers, (count, *shape), (numbers.strides[0], 8 * shape[1], 8))
+            numbers[...] = values
         return out
