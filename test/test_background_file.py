@@ -6,7 +6,7 @@ import io
 
 import pytest
 
-from neforward_ros.bag.background_file import BackgroundFile
+from neforward_ros.bag.background_file import BackgroundFile, _fallocate
 
 
 def test_writes_land_in_order_and_tell_counts_them_before_they_are_done(tmp_path) -> None:
@@ -38,12 +38,17 @@ def test_writes_land_in_order_and_tell_counts_them_before_they_are_done(tmp_path
 
 def test_room_reserved_ahead_is_cut_back_to_what_was_written(tmp_path) -> None:
     path = tmp_path / "out.bin"
+    with (tmp_path / "probe").open("wb") as probe:
+        try:
+            _fallocate(probe.fileno(), 0, 4096)
+        except OSError as exc:
+            pytest.skip(f"the file system of {tmp_path} does not allocate ahead ({exc}): nothing to cut back")
     file = BackgroundFile(path.open("wb"))
     file.write(b"a" * 10)
     file.reserve(1 << 20)
     file.write(b"b" * 5)
     file.flush()
-    assert path.stat().st_size >= 1 << 20  # allocated ahead (posix_fallocate extends the file)
+    assert path.stat().st_size >= 1 << 20  # allocated ahead (fallocate extends the file)
     file.close()
     assert path.read_bytes() == b"a" * 10 + b"b" * 5
 

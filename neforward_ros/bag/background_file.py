@@ -8,6 +8,8 @@ file will have once they are done, so the MCAP writer's offsets are right. An er
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import os
 import queue
 import threading
@@ -54,7 +56,7 @@ class BackgroundFile:
     def _allocate(self, offset: int, size: int) -> None:
         try:
             self._file.flush()
-            os.posix_fallocate(self._file.fileno(), offset, size)
+            _fallocate(self._file.fileno(), offset, size)
         except (OSError, AttributeError, ValueError):
             pass  # a file system that cannot, or no room: the writes find out
 
@@ -115,3 +117,25 @@ class BackgroundFile:
     @property
     def closed(self) -> bool:
         return self._file.closed
+
+
+def _fallocate(descriptor: int, offset: int, size: int) -> None:
+    """Linux's fallocate(2), which fails where the file system cannot allocate ahead (glibc's
+    posix_fallocate would then write every block instead: on a network file system, the whole size).
+
+    Raises:
+        OSError: not allocated (no such call here, a file system that cannot, no room).
+    """
+    libc = _libc()
+    function = getattr(libc, "fallocate64", None) or getattr(libc, "fallocate", None)
+    if function is None:
+        raise OSError("no fallocate on this system")
+    function.argtypes = [ctypes.c_int, ctypes.c_int, ctypes.c_int64, ctypes.c_int64]
+    function.restype = ctypes.c_int
+    if function(descriptor, 0, offset, size) != 0:
+        number = ctypes.get_errno()
+        raise OSError(number, os.strerror(number))
+
+
+def _libc() -> ctypes.CDLL:
+    return ctypes.CDLL(ctypes.util.find_library("c") or None, use_errno=True)

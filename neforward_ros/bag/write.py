@@ -88,6 +88,7 @@ class RecordingWriter:
                 for topic, kind in output_topics(options)
             }
         except BaseException:
+            _close_quietly(self.writer if hasattr(self, "writer") else None)
             shutil.rmtree(self.staging, ignore_errors=True)
             raise
         self.topics = [topic for topic, _ in output_topics(options)]
@@ -173,11 +174,25 @@ class RecordingWriter:
 
     def discard(self) -> None:
         """Forget everything written (after an error or an interrupt)."""
-        try:
-            self.writer.close()
-        except Exception:  # a half-written storage may not close cleanly; it is deleted anyway
-            pass
+        _close_quietly(self.writer)
         shutil.rmtree(self.staging, ignore_errors=True)
+
+
+def _close_quietly(writer: Any) -> None:
+    """Close a rosbags writer that may be half-written (it is deleted anyway), and its file's thread
+    with it in any case."""
+    if writer is None:
+        return
+    try:
+        writer.close()
+    except Exception:  # a half-written storage may not close cleanly
+        pass
+    bio = getattr(getattr(writer, "storage", None), "bio", None)
+    if isinstance(bio, BackgroundFile) and not bio.closed:
+        try:
+            bio.close()
+        except Exception:
+            pass
 
 
 _FAST_MCAP = True  # tests turn it off to compare with rosbags' own per-message writing
