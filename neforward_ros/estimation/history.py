@@ -36,6 +36,7 @@ class JointHistory:
         "newest_received",
         "origin",
         "repeated",
+        "run",
         "slots",
         "start",
         "track",
@@ -61,6 +62,9 @@ class JointHistory:
         self.last_without_velocity = -1  # buffer index of the newest sample that had no velocity at all
         self.repeated = 0  # samples left out as repeats since the newest one kept
         self.left_out: deque[int] = deque(maxlen=64)  # the stamps of the latest ones
+        # The samples left out since the newest one kept, as given (stamp, positions, velocities,
+        # efforts): taken back, in order, when the run turns out to be a stop.
+        self.run: list[tuple[int, list[float], list[float], list[float]]] = []
         self.newest_received = 0  # the stamp of the newest sample, kept or left out
 
     def __len__(self) -> int:
@@ -106,9 +110,9 @@ class JointHistory:
     def newest_position(self, joint: int) -> float:
         return float(self._positions[self.end - 1, self.slots[joint]])
 
-    def repeats(self, stamp_ns: int, positions: list[float]) -> bool:
-        """Whether a sample of these positions (in the order of :attr:`joints`) at this stamp, newer than
-        the newest, repeats it (:mod:`neforward_ros.estimation.repeats`); counted when it does."""
+    def repeats(self, stamp_ns: int, positions: list[float], velocities: list[float], efforts: list[float]) -> bool:
+        """Whether a sample (in the order of :attr:`joints`) at this stamp, newer than the newest,
+        repeats it (:mod:`neforward_ros.estimation.repeats`); kept aside when it does."""
         if len(self) < MOVING_STEPS + 1 or self.repeated >= MOST_REPEATS:
             return False
         newest = self._positions[self.end - 1]
@@ -120,11 +124,32 @@ class JointHistory:
         self.intervals.append(stamp_ns - self.newest_received)
         self.newest_received = stamp_ns
         self.left_out.append(stamp_ns)
+        self.run.append((stamp_ns, list(positions), list(velocities), list(efforts)))
         return True
 
     def append(
         self, stamp_ns: int, positions: list[float], velocities: list[float], efforts: list[float], max_hole_ns: int
     ) -> None:
+        """A new sample, newest of all. After a run of :data:`MOST_REPEATS` left-out samples (a stop,
+        not a driver's repeats) those samples are taken back first, in order."""
+        run, self.run = self.run, []
+        if run and self.repeated >= MOST_REPEATS:
+            for sample in run:
+                self._store(*sample, max_hole_ns, received=False)
+                self.left_out.pop()
+        self._store(stamp_ns, positions, velocities, efforts, max_hole_ns, received=True)
+
+    def _store(
+        self,
+        stamp_ns: int,
+        positions: list[float],
+        velocities: list[float],
+        efforts: list[float],
+        max_hole_ns: int,
+        received: bool,
+    ) -> None:
+        """Store a sample; ``received``: it is the newest message's (not one taken back), whose interval
+        from the message before is counted."""
         if self.end == len(self._stamps):
             count = len(self)
             arrays = ("_stamps", "_seconds", "_positions", "_velocities", "_efforts")
@@ -142,7 +167,7 @@ class JointHistory:
             interval = stamp_ns - int(self._stamps[end - 1])
             if interval > max_hole_ns:
                 self.holes.append(stamp_ns)
-            else:
+            elif received:
                 self.intervals.append(stamp_ns - self.newest_received)  # from the last message, repeats too
         self._stamps[end] = stamp_ns
         self._seconds[end] = (stamp_ns - self.origin) / NS
@@ -155,7 +180,8 @@ class JointHistory:
             self.last_without_velocity = end
         self.end = end + 1
         self.repeated = 0
-        self.newest_received = stamp_ns
+        if received:
+            self.newest_received = stamp_ns
         if self.track is not None:
             self.track.add(stamp_ns, self._positions[end], self._velocities[end])
 
@@ -198,6 +224,7 @@ class JointHistory:
         self._positions = self._positions[:, columns].copy()
         self._velocities = self._velocities[:, columns].copy()
         self._efforts = self._efforts[:, columns].copy()
+        self.run = [(stamp, *([values[k] for k in columns] for values in sample)) for stamp, *sample in self.run]
         self.joints = keep
         self.slots = {j: k for k, j in enumerate(keep)}
 

@@ -14,11 +14,14 @@ samples around it), when all of these hold:
   it: a joint that moves that steadily cannot stand still for exactly one interval, even at an
   encoder's resolution (a slow, quantised joint, whose samples often repeat, has steps without a
   change and is not affected; neither is a joint at rest);
-- fewer than :data:`MOST_REPEATS` samples just before it were taken as repeats: a longer run is a
-  stop, kept from then on.
+- it does not make a run of more than :data:`MOST_REPEATS` equal samples: a longer run is a stop,
+  and the samples of the run are taken back into the fits, in order, as soon as the sample after
+  :data:`MOST_REPEATS` of them is equal too. No estimate of a stamp among them is made before that
+  (a repeat's stamp waits for the next sample kept, in every mode), so none is made without them.
 
-The rule looks only at the samples before it, so the node (one message at a time) and the bag tool
-(a whole recording, :func:`repeated`) leave out the same samples.
+The rule looks only at the samples before it and at most :data:`MOST_REPEATS` after, so the node
+(one message at a time) and the bag tool (a whole recording, :func:`repeated`) leave out the same
+samples and make each estimate from the same ones.
 """
 
 from __future__ import annotations
@@ -58,7 +61,8 @@ def repeated(positions: np.ndarray, starts: np.ndarray | None = None) -> np.ndar
         streak = 0
         while k - 1 - streak >= first[k] and out[k - 1 - streak]:
             streak += 1
-        if streak >= MOST_REPEATS:
+        if streak >= MOST_REPEATS:  # a stop: the run before it was no driver's repeats
+            out[k - streak : k] = False
             continue
         kept: list[int] = []  # the kept samples of its history before k, newest first
         i = k - 1

@@ -279,7 +279,7 @@ class StreamingEstimator:
             if len(values) < len(group.joints):
                 group = self._split(group, [j for j in group.joints if j in values])
             columns = [values[j] for j in group.joints]
-            if group.repeats(stamp, [position for position, _, _ in columns]):
+            if group.repeats(stamp, *(list(x) for x in zip(*columns, strict=True))):
                 repeats += 1  # a driver's repeated reading (:mod:`.repeats`): no sample; its stamp is a target
                 continue
             group.append(stamp, *(list(x) for x in zip(*columns, strict=True)), self._hole_ns)
