@@ -186,3 +186,34 @@ def test_the_accuracy_test_fails_when_repeats_are_fitted(monkeypatch) -> None:
     monkeypatch.setattr(JointHistory, "repeats", lambda self, stamp_ns, positions: False)
     with pytest.raises(AssertionError):
         test_repeated_readings_do_not_read_as_noise(1, 1000.0)
+
+
+def test_a_stop_in_one_joint_group_while_another_moves_on_is_estimated_as_the_whole_recording_does() -> None:
+    """Two joint groups in messages of their own (their stamps interleaved): while one group's run of
+    equal readings is not yet told from a stop, the other group's messages release no estimate whose
+    fit reaches into the run, so the node estimates the stopped group as the whole-recording fit does."""
+    rng = np.random.default_rng(5)
+    count = 3000
+    t = (np.arange(count) + rng.uniform(-0.05, 0.05, count)) / 1000.0
+    q, _ = motion(t)
+    a = q[:, :1].copy()
+    a[1400:1460] = a[1399]  # a dead stop of 60 samples
+    a[1460:] += a[1399] - a[1460]
+    shifted = t + 0.0004  # joint b's messages, between joint a's
+    estimator = StreamingEstimator(["a", "b"], settings=StreamSettings(adaptive=False))
+    stamps_a = 10**18 + np.round(t * 1e9).astype(np.int64)
+    stamps_b = 10**18 + np.round(shifted * 1e9).astype(np.int64)
+    got: dict[int, float] = {}
+    for k in range(count):
+        for stamp, name, value in ((stamps_a[k], "a", a[k, 0]), (stamps_b[k], "b", q[k, 1])):
+            for estimate in estimator.update(int(stamp), [name], [float(value)]):
+                if np.isfinite(estimate.accelerations[0]):
+                    got[estimate.stamp_ns] = float(estimate.accelerations[0])
+    keys = np.array(sorted(got))
+    targets = (keys - 10**18) / 1e9
+    fresh = ~repeated(a)
+    _, _, whole = estimate_at(t[fresh], a[fresh], targets, adaptive=False)
+    near = (targets > 1.2) & (targets < 1.7)  # the stop and the fits that reach it
+    assert np.count_nonzero(near) > 500
+    streamed = np.array([got[k] for k in keys])
+    np.testing.assert_allclose(streamed[near], whole[near, 0], rtol=0, atol=1e-8 * np.abs(whole).max())

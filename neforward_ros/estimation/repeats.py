@@ -17,7 +17,8 @@ samples around it), when all of these hold:
 - it does not make a run of more than :data:`MOST_REPEATS` equal samples: a longer run is a stop,
   and the samples of the run are taken back into the fits, in order, as soon as the sample after
   :data:`MOST_REPEATS` of them is equal too. No estimate of a stamp among them is made before that
-  (a repeat's stamp waits for the next sample kept, in every mode), so none is made without them.
+  (a repeat's stamp waits for the next sample kept, in every mode; another joint group's messages
+  meanwhile release no estimate whose fit reaches the run), so none is made without them.
 
 The rule looks only at the samples before it and at most :data:`MOST_REPEATS` after, so the node
 (one message at a time) and the bag tool (a whole recording, :func:`repeated`) leave out the same

@@ -229,7 +229,11 @@ class StreamingEstimator:
         self._pending.append(stamp)
         if added is _REPEATS:
             return []  # a repeated reading is a target, and tells nothing new about the ones before it
-        out = [self._estimate(target) for target in self._drain(stamp - self._lag_ns + self._tolerance())]
+        until = stamp - self._lag_ns + self._tolerance()
+        runs = [group.run[0][0] for group in self._groups if group.run]
+        if runs:  # another group's run of repeats, not yet told from a stop: no estimate whose fit reaches it
+            until = min(until, min(runs) - self._lag_ns - 1)
+        out = [self._estimate(target) for target in self._drain(until)]
         self._targets += 1
         if self._targets % 32 == 0:  # forget old samples now and then
             for group in self._groups:
