@@ -10,8 +10,9 @@ The reference for a setting of delay d is hindsight (``hindsight.py``): the best
 polynomial fit whose window reaches at most d past the estimate, its window and degree chosen per
 motion knowing the truth. Printed per case and setting: q-ddot's relative RMS error (RMS of the error
 over RMS of q-ddot, after the first second and before the last half second, at up to 600 evaluated
-samples) and its ratio to the reference; then each setting's median and worst ratio against the
-target (issue 26: at most 1.5 for every setting on every motion), the cost per message, and the
+samples; a NaN estimate is marked and counted, its error left out) and its ratio to the reference;
+then each setting's median and worst ratio against the target (issue 26: at most 1.5 for every
+setting on every motion), its NaN estimates, the cost per message, and the
 honesty of the stated standard deviation (RMS of error / sigma per case: 1 for an honest sigma). With
 --plot, the trade-off figure: each setting's delay against its median and worst error.
 
@@ -80,6 +81,7 @@ def main() -> None:
     ratios: dict[str, list[float]] = {name: [] for name in SETTINGS}
     costs: dict[str, list[float]] = {name: [] for name in SETTINGS}
     honesty: dict[str, list[float]] = {name: [] for name in SETTINGS}
+    nans: dict[str, list[tuple[int, int]]] = {name: [] for name in SETTINGS}  # (estimates with NaN, evaluated)
     worst: dict[str, tuple[float, str]] = {}
     print("per case and setting: q-ddot relative RMS error, and its ratio to hindsight for the setting's delay")
     print(f"{'motion':<10}{'rate':>5}{'bits':>5}{'rep':>4}  " + "".join(f"{s:>20}" for s in SHORT))
@@ -114,11 +116,14 @@ def main() -> None:
                     case = f"{kind} {rate} Hz {bits} bits" + (f" {repeats:.0%} repeats" if repeats else "")
                     if ratio > worst.get(name, (-1.0, ""))[0]:
                         worst[name] = (ratio, case)
-                    lost = "" if found.all() else "!"
+                    finite = np.isfinite(values).all(axis=1)
+                    nans[name].append((np.count_nonzero(found & ~finite), len(evaluated)))
+                    lost = "" if found.all() and finite.all() else "!"
                     row.append(f"{e:>11.2%}{lost:1}{ratio:>7.2f}x")
                 rep = f"{repeats:.0%}" if repeats else "-"
                 print(f"{kind:<10}{rate:>5}{bits:>5}{rep:>4}  " + "".join(row), flush=True)
-    print("(! marks a case where the setting gave no estimate at some evaluated samples)")
+    print("(! marks a case where the setting gave no estimate, or a NaN one, at some evaluated samples; the error"
+          " is over the finite ones)")  # fmt: skip
     print()
     for name, settings in SETTINGS.items():
         values = np.array(ratios[name])
@@ -128,6 +133,10 @@ def main() -> None:
               f"{np.max(errors[name]):.2%}; ratio to hindsight median {np.median(values):.2f}, worst "
               f"{values.max():.2f} ({worst[name][1]}): target <= {TARGET:g} {verdict}; "
               f"{np.median(costs[name]) * 1e6:.0f} us per message")  # fmt: skip
+        bad, total = (sum(x) for x in zip(*nans[name], strict=True))
+        cases = sum(1 for b, _ in nans[name] if b)
+        print(f"  estimates with a NaN acceleration: {bad} of {total} evaluated ({100 * bad / total:.2f} %), "
+              f"in {cases} cases")  # fmt: skip
         z = np.array(honesty[name])
         if np.isfinite(z).any():
             inside = np.mean((z >= 0.5) & (z <= 2.0))
