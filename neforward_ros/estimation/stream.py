@@ -282,11 +282,11 @@ class StreamingEstimator:
         for group, values in by_group.values():
             if len(values) < len(group.joints):
                 group = self._split(group, [j for j in group.joints if j in values])
-            columns = [values[j] for j in group.joints]
-            if group.repeats(stamp, *(list(x) for x in zip(*columns, strict=True))):
+            sample = [list(x) for x in zip(*(values[j] for j in group.joints), strict=True)]  # q, v, effort
+            if group.repeats(stamp, *sample):
                 repeats += 1  # a driver's repeated reading (:mod:`.repeats`): no sample; its stamp is a target
                 continue
-            group.append(stamp, *(list(x) for x in zip(*columns, strict=True)), self._hole_ns)
+            group.append(stamp, *sample, self._hole_ns)
             self._watch_innovations(group)
         if fresh:
             track = None
