@@ -49,10 +49,11 @@ def run(arguments: list[str], capsys) -> str:
 def test_panda_torques_from_the_default_estimates_are_as_good_as_a_zero_phase_filter(panda, tmp_path):
     """Issue 26: with default settings, every joint's torque error against the measured torque is
     at most 1.05x that of rnea on the zero-phase 15 Hz low-pass, and at least 95 % of the samples
-    get torques (repeated readings and irregular stamps read neither as stops nor as noise)."""
+    get torques (repeated readings and irregular stamps read neither as stops nor as noise); the
+    stated standard deviation is honest: RMS of (q'' - reference) / sigma within 0.5..2 per joint."""
     urdf, stamps, q, v, measured = panda
-    reference_torques, _ = bench_realdata.reference(urdf, stamps, q, v)
-    out_stamps, torques, _, _ = bench_realdata.run_bag(urdf, [], tmp_path)
+    reference_torques, reference_accelerations = bench_realdata.reference(urdf, stamps, q, v)
+    out_stamps, torques, accelerations, sigma = bench_realdata.run_bag(urdf, [], tmp_path)
     rows = np.searchsorted(stamps, out_stamps)
     assert np.array_equal(stamps[rows], out_stamps)
     scale = np.sqrt(np.mean(measured**2, axis=0))
@@ -60,6 +61,10 @@ def test_panda_torques_from_the_default_estimates_are_as_good_as_a_zero_phase_fi
     reference = np.sqrt(np.mean((reference_torques - measured) ** 2, axis=0)) / scale
     assert len(out_stamps) >= 0.95 * len(stamps)
     assert np.all(error <= 1.05 * reference), (error / reference).round(3)
+    z = (accelerations - reference_accelerations[rows]) / sigma
+    honesty = np.sqrt(np.nanmean(z**2, axis=0))
+    assert np.mean(np.isfinite(z)) >= 0.95
+    assert np.all((honesty >= 0.5) & (honesty <= 2.0)), honesty.round(2)
 
 
 def test_panda_last_40_percent_gives_external_torques_at_every_block_edge(tmp_path, capsys):

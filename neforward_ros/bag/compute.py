@@ -27,6 +27,7 @@ from neforward_ros.computation.live_inputs import Inputs, LiveInputs
 from neforward_ros.computation.observer import RawStates
 from neforward_ros.computation.raw_samples import RawAssembler
 from neforward_ros.computation.result import Observation, Result
+from neforward_ros.estimation.adaptive import pooled_std
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.coverage import covered_mask
 from neforward_ros.estimation.repeats import repeated
@@ -258,6 +259,8 @@ def _whole(
             state[column][:, joints] = values
         spread[:, joints] = np.where(unready[:, None], np.nan, std_at)
     ready = np.isfinite(state).all(axis=0)
+    if batch.method == "polyfit" and batch.adaptive:  # as the node states them
+        spread = pooled_std(targets, np.where(ready, spread, np.nan), batch.window)
     states = JointStates(targets, *np.where(ready, state, 0.0), ready, silent, efforts, spread)
     states = with_held(states, held_joints(recording, settings))
     return states, recording.log_times[start:stop][first], sorted(set(absent))

@@ -23,7 +23,7 @@ import numpy as np
 
 from neforward_ros.errors import InputError
 from neforward_ros.estimation import native_fit
-from neforward_ros.estimation.adaptive import adaptive_fit
+from neforward_ros.estimation.adaptive import DeviationPool, adaptive_fit
 from neforward_ros.estimation.coverage import uncovered
 from neforward_ros.estimation.estimate import JointEstimate
 from neforward_ros.estimation.fit import fit_window, local_difference
@@ -103,6 +103,10 @@ class StreamingEstimator:
         self._kalman = self.settings.method == "kalman"
         self._keep_ns = round((self.settings.window + self.settings.effective_lag) * NS) + self._gap_ns
         self._pending: deque[int] = deque()
+        # polyfit's adaptive windows: each estimate's stated deviations pool the last half window's
+        self._pool = None
+        if self.settings.method == "polyfit" and self.settings.adaptive:
+            self._pool = DeviationPool(self.settings.window, len(self.joint_names))
         self._intervals: deque[int] = deque(maxlen=8)  # the last stamp intervals, ns
         # Per joint, how hard the estimator strains (see _watch_windows, _watch_innovations).
         self._strain = np.zeros(len(self.joint_names))
@@ -166,6 +170,8 @@ class StreamingEstimator:
         self._groups = []
         self._group_of = [None] * len(self.joint_names)
         self._pending.clear()
+        if self._pool is not None:
+            self._pool.clear()
         self._intervals.clear()
         self._clock = None
 
@@ -343,6 +349,8 @@ class StreamingEstimator:
         if not ready.all():
             state[~ready, :3] = np.nan
             state[~ready, 4] = np.nan
+        if self._pool is not None:
+            state[:, 4] = self._pool.state(target, state[:, 4])
         return JointEstimate(
             target, self.segment, state[:, 0], state[:, 1], state[:, 2], ages, ready, state[:, 3], state[:, 4]
         )
