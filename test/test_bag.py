@@ -642,3 +642,34 @@ def test_the_fast_mcap_reading_gives_what_rosbags_gives(tmp_path) -> None:
         return
     raws, times = fast
     assert times.tolist() == [t for t, _ in expected] and raws == [raw for _, raw in expected]
+
+
+def test_the_stated_deviations_are_the_nodes_through_a_gap_and_a_time_reset(tmp_path) -> None:
+    """The default's stated sigma pools the last half window's estimates (adaptive.pooled_std in the
+    bag tool, adaptive.DeviationPool in the node): through a 0.3 s gap (the joints' histories
+    restart) and a second run whose stamps go back (a new segment, the pool starts afresh), the
+    node fed the recording's messages in order and the bag tool state the same sigma stamp by stamp."""
+    from neforward_ros.node.pipeline import Pipeline
+    from neforward_ros.parameters.settings import node_settings
+    from neforward_ros.wire.rostypes import deserialize
+
+    record(tmp_path / "in", seconds=2.0, runs=2, gap=1.0)
+    assert main(["bag", str(tmp_path / "in"), "-o", str(tmp_path / "out"), "--urdf", str(PANDA),
+                 "--joint-estimates"]) == 0  # fmt: skip
+    written = [deserialize(topics.JOINT_TRAJECTORY_TYPE, raw) for _, raw in read_output(tmp_path / "out")[
+        "/neforward/joint_estimates"]]  # fmt: skip
+    pipeline = Pipeline(node_settings({"robot_description": PANDA.read_text(), "publish_joint_estimates": True}))
+    published = []
+    with Reader(tmp_path / "in") as reader:
+        for connection, _, raw in reader.messages():
+            if connection.topic == "/joint_states":
+                m = deserialize(topics.JOINT_STATE_TYPE, raw)
+                stamp = m["header"]["stamp"]["sec"] * 10**9 + m["header"]["stamp"]["nanosec"]
+                for result in pipeline.on_joint_state(stamp, m["name"], m["position"]):
+                    published.append(dict(pipeline.messages(result))[topics.JOINT_ESTIMATES])
+    assert len(written) == len(published) > 1000
+    node = np.array([p["points"][0]["effort"] for p in published])
+    bag = np.array([w["points"][0]["effort"] for w in written])
+    assert [w["header"]["stamp"] for w in written] == [p["header"]["stamp"] for p in published]
+    assert node.shape == bag.shape and np.all(node > 0)
+    np.testing.assert_allclose(bag, node, rtol=1e-9)
