@@ -225,11 +225,17 @@ def select(
 def stated_std(estimates: np.ndarray, valid: np.ndarray, chosen: np.ndarray, std: np.ndarray) -> np.ndarray:
     """The standard deviation stated with the ICI choice ``chosen`` (...) among the levels' (L, ...)
     ``estimates``, ``std`` (...) the chosen level's noise: that noise and the chosen estimate's distance
-    to the next smaller valid level's, added in quadrature (the noise alone where it is the smallest)."""
+    to the next smaller valid level's, added in quadrature; where the smallest valid level was chosen
+    (the rule strained: even that window's bias broke the intersection, or nothing smaller fits), to
+    the next larger level's instead (whose bias is larger: a bound, not an estimate); the noise alone
+    where only one level is valid."""
     below = np.minimum(chosen + 1, len(estimates) - 1)[None]
-    apart = np.take_along_axis(estimates, chosen[None], 0)[0] - np.take_along_axis(estimates, below, 0)[0]
     smaller = (below[0] > chosen) & np.take_along_axis(valid, below, 0)[0]
-    return np.where(smaller, np.sqrt(std * std + apart * apart), std)
+    above = np.maximum(chosen - 1, 0)[None]
+    larger = ~smaller & (above[0] < chosen) & np.take_along_axis(valid, above, 0)[0]
+    other = np.where(smaller, below[0], above[0])[None]
+    apart = np.take_along_axis(estimates, chosen[None], 0)[0] - np.take_along_axis(estimates, other, 0)[0]
+    return np.where(smaller | larger, np.sqrt(std * std + apart * apart), std)
 
 
 PRECISION = 1e4

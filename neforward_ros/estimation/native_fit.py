@@ -167,10 +167,13 @@ static void choose(double *fits, long valid, long n, const long *lo, const long 
         int strained = (chosen == smallest_level && smallest_level > 0) || white[j] > roughness * spread[j];
         for (long k = 0; k < 4; k++) out[k * n + j] = fit[k];
         noise[j] = fit[3];
-        if (chosen + 1 < valid) {  /* the distance to the next smaller window's estimate, in quadrature */
-            const double *below = fits + ((chosen + 1) * n + j) * 5;
+        /* the distance to the next smaller window's estimate, in quadrature; where the smallest was
+           chosen, to the next larger one's */
+        long other = chosen + 1 < valid ? chosen + 1 : chosen - 1;
+        if (other >= 0) {
+            const double *neighbour = fits + (other * n + j) * 5;
             long k = derivative[j] == 2 ? 2 : 1;
-            double apart = fit[k] - below[k];
+            double apart = fit[k] - neighbour[k];
             out[3 * n + j] = sqrt(fit[3] * fit[3] + apart * apart);
         }
         out[4 * n + j] = strained ? 1.0 : 0.0;
