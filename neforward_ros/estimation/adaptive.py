@@ -239,8 +239,8 @@ def stated_std(estimates: np.ndarray, valid: np.ndarray, chosen: np.ndarray, std
 
 
 PRECISION = 1e4
-"""How much larger than a window's sum of squared deviations the running sum up to it may be for the
-window's to be taken as a difference of running sums (:func:`pooled_std`)."""
+"""How much larger than a window's sum of squared deviations the running sum (from its chunk's start)
+up to it may be for the window's to be taken as a difference of running sums (:func:`pooled_std`)."""
 POOL_CHUNK = 8192
 """Estimates pooled at once by :func:`pooled_std` (each chunk's running sums start afresh)."""
 
