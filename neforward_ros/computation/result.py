@@ -231,8 +231,8 @@ class Result:
 
     @cached_property
     def in_root(self) -> LinkKinematics:
-        """The same vectors along the root frame's axes."""
-        return self.in_link.in_root()
+        """The same vectors along the root frame's axes (the rows give them)."""
+        return LinkKinematics.from_table(self.link_names, self.table, frame="root")
 
     def sample(self, index: int) -> Result:
         """One sample of a batched result (all of whose links are determined). Its message numbers

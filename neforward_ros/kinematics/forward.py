@@ -35,7 +35,7 @@ from typing import Any, Literal
 import numpy as np
 
 from neforward_ros.errors import InputError
-from neforward_ros.kinematics.forward_kernel import ROW, SLICES, kernel_of
+from neforward_ros.kinematics.forward_kernel import IN_ROOT, ROW, SLICES, kernel_of
 from neforward_ros.model import RobotModel
 
 DEFAULT_GRAVITY = (0.0, 0.0, -9.81)
@@ -128,12 +128,18 @@ class LinkKinematics:
     frame: Literal["link", "root"] = "link"
 
     @classmethod
-    def from_table(cls, link_names: tuple[str, ...], table: np.ndarray) -> LinkKinematics:
-        """Views into a table of the kernel's rows, (..., n_links, ROW)."""
+    def from_table(
+        cls, link_names: tuple[str, ...], table: np.ndarray, frame: Literal["link", "root"] = "link"
+    ) -> LinkKinematics:
+        """Views into a table of the kernel's rows, (..., n_links, ROW); with ``frame="root"`` the
+        vectors are the rows' own along the root axes (``<name>_in_root``: what :meth:`in_root`
+        computes, without computing it again)."""
         own = {field.name for field in fields(cls)}
         views = {name: table[..., part] for name, part in SLICES.items() if name in own}
         views["rotation"] = views["rotation"].reshape((*table.shape[:-1], 3, 3))
-        return cls(link_names=link_names, **views)  # the kernel gives orientations with w >= 0
+        if frame == "root":
+            views.update({name: table[..., SLICES[f"{name}_in_root"]] for name in IN_ROOT})
+        return cls(link_names=link_names, frame=frame, **views)  # the kernel gives orientations with w >= 0
 
     def in_root(self) -> LinkKinematics:
         """The same kinematics with omega, alpha, velocity, accel, com_accel and com_velocity in root axes.
