@@ -35,7 +35,6 @@ class JointHistory:
         "left_out",
         "newest_received",
         "origin",
-        "repeated",
         "run",
         "slots",
         "start",
@@ -60,10 +59,9 @@ class JointHistory:
         self.start = 0
         self.end = 0
         self.last_without_velocity = -1  # buffer index of the newest sample that had no velocity at all
-        self.repeated = 0  # samples left out as repeats since the newest one kept
-        self.left_out: deque[int] = deque(maxlen=64)  # the stamps of the latest ones
-        # The samples left out since the newest one kept, as given (stamp, positions, velocities,
-        # efforts): taken back, in order, when the run turns out to be a stop.
+        self.left_out: deque[int] = deque(maxlen=64)  # the stamps of the latest samples left out as repeats
+        # The samples left out as repeats since the newest one kept, as given (stamp, positions,
+        # velocities, efforts): taken back, in order, when the run turns out to be a stop.
         self.run: list[tuple[int, list[float], list[float], list[float]]] = []
         self.newest_received = 0  # the stamp of the newest sample, kept or left out
 
@@ -113,14 +111,13 @@ class JointHistory:
     def repeats(self, stamp_ns: int, positions: list[float], velocities: list[float], efforts: list[float]) -> bool:
         """Whether a sample (in the order of :attr:`joints`) at this stamp, newer than the newest,
         repeats it (:mod:`neforward_ros.estimation.repeats`); kept aside when it does."""
-        if len(self) < MOVING_STEPS + 1 or self.repeated >= MOST_REPEATS:
+        if len(self) < MOVING_STEPS + 1 or len(self.run) >= MOST_REPEATS:
             return False
         newest = self._positions[self.end - 1]
         if any(p != newest[k] for k, p in enumerate(positions)):
             return False
         if not moving(self._positions[self.end - MOVING_STEPS - 1 : self.end]):
             return False
-        self.repeated += 1
         self.intervals.append(stamp_ns - self.newest_received)
         self.newest_received = stamp_ns
         self.left_out.append(stamp_ns)
@@ -133,7 +130,7 @@ class JointHistory:
         """A new sample, newest of all. After a run of :data:`MOST_REPEATS` left-out samples (a stop,
         not a driver's repeats) those samples are taken back first, in order."""
         run, self.run = self.run, []
-        if run and self.repeated >= MOST_REPEATS:
+        if len(run) >= MOST_REPEATS:
             for sample in run:
                 self._store(*sample, max_hole_ns, received=False)
                 self.left_out.pop()
@@ -179,7 +176,6 @@ class JointHistory:
         if all(v != v for v in velocities):  # all NaN
             self.last_without_velocity = end
         self.end = end + 1
-        self.repeated = 0
         if received:
             self.newest_received = stamp_ns
         if self.track is not None:
