@@ -23,10 +23,11 @@ import numpy as np
 
 from neforward_ros.errors import InputError
 from neforward_ros.estimation import native_fit
-from neforward_ros.estimation.adaptive import DeviationPool, adaptive_fit
+from neforward_ros.estimation.adaptive import LEVELS, DeviationPool, adaptive_fit, ladder
+from neforward_ros.estimation.causal_choice import DEGREES, ErrorScores, candidates, usable
 from neforward_ros.estimation.coverage import uncovered
 from neforward_ros.estimation.estimate import JointEstimate
-from neforward_ros.estimation.fit import fit_window, local_difference
+from neforward_ros.estimation.fit import degrees, fit_window, local_difference
 from neforward_ros.estimation.history import JointHistory
 from neforward_ros.estimation.joint_messages import JointMessageReader, Sample
 from neforward_ros.estimation.kalman_bank import LENGTH_SCALES, KalmanBank
@@ -107,6 +108,15 @@ class StreamingEstimator:
         self._pool = None
         if self.settings.method == "polyfit" and self.settings.adaptive:
             self._pool = DeviationPool(self.settings.window, len(self.joint_names))
+        # polyfit's causal adaptive fits: the candidate chosen by its errors half a window ago (.causal_choice)
+        self._scores: ErrorScores | None = None
+        # every candidate's estimates at the target being estimated, where kept for scoring (else None)
+        self._candidates: np.ndarray | None = None
+        if self.settings.method == "polyfit" and self.settings.adaptive and self._lag_ns == 0:
+            half = self.settings.window / 2.0
+            self._half_widths = ladder(half)
+            self._scores = ErrorScores(len(self.joint_names), len(DEGREES) * LEVELS, half, round(half * NS))
+            self._reference_support = StreamSettings(window=self.settings.window).support
         self._intervals: deque[int] = deque(maxlen=8)  # the last stamp intervals, ns
         # Per joint, how hard the estimator strains (see _watch_windows, _watch_innovations).
         self._strain = np.zeros(len(self.joint_names))
@@ -172,6 +182,8 @@ class StreamingEstimator:
         self._pending.clear()
         if self._pool is not None:
             self._pool.clear()
+        if self._scores is not None:
+            self._scores.clear()
         self._intervals.clear()
         self._clock = None
 
@@ -317,6 +329,8 @@ class StreamingEstimator:
 
     def _forget(self, group: JointHistory, joints: list[int]) -> None:
         group.remove(joints)
+        if self._scores is not None:
+            self._scores.clear(joints)
         for j in joints:
             self._group_of[j] = None
         if not group.joints:
@@ -341,10 +355,16 @@ class StreamingEstimator:
         n = len(self.joint_names)
         state = np.full((n, 5), np.nan)  # position, velocity, acceleration, effort, acceleration's std
         ages = np.full(n, np.inf)
+        if self._scores is not None:
+            self._score(target)
+            keeping = self._scores.wants(target)
+            self._candidates = np.full((len(DEGREES) * LEVELS, n), np.nan) if keeping else None
         for group in self._groups:
             self._estimate_group(target, group, state, ages)
             if group.track is not None:
                 group.track.forget_before(target)
+        if self._candidates is not None:
+            self._scores.keep(target, self._candidates)
         ready = np.isfinite(state[:, :3]).all(axis=1)
         if not ready.all():
             state[~ready, :3] = np.nan
@@ -429,16 +449,19 @@ class StreamingEstimator:
                 derivative = np.where(by_velocity, 1, 2)
             elif fitted_velocities:
                 derivative[m:] = 1
-            fitted, d1, d2, spread, smallest = adaptive_fit(
-                times,
-                values,
-                target_s,
-                settings.window / 2.0,
-                settings.degree,
-                lead_ns / NS,
-                derivative,
-                settings.lower_degree,
-            )
+            if self._scores is not None and values.shape[1] == m:  # a column per joint: scored per joint
+                fitted, d1, d2, spread, smallest = self._chosen_fit(group, times, values, target_s, derivative)
+            else:
+                fitted, d1, d2, spread, smallest = adaptive_fit(
+                    times,
+                    values,
+                    target_s,
+                    settings.window / 2.0,
+                    settings.degree,
+                    lead_ns / NS,
+                    derivative,
+                    settings.lower_degree,
+                )
             joint_smallest = smallest[:m].copy()
             if fitted_velocities and not exact:  # the acceleration of those joints: their velocities' fit's
                 joint_smallest[by_velocity] = smallest[m:]
@@ -454,6 +477,69 @@ class StreamingEstimator:
             velocity[by_velocity], acceleration[by_velocity] = fitted[m:], d1[m:]
             spread_m[by_velocity] = spread[m:]
         return fitted[:m], velocity, acceleration, spread_m
+
+    def _chosen_fit(
+        self, group: JointHistory, times: np.ndarray, values: np.ndarray, target_s: float, derivative: np.ndarray
+    ) -> tuple[np.ndarray, ...]:
+        """The causal fit of each joint's candidate with the smallest recent error (:mod:`.causal_choice`),
+        the adaptive rule's where a joint has no record yet: value, first and second derivative, the
+        estimate's standard deviation and whether it took the smallest window its degree allows (m,)."""
+        joints = np.asarray(group.joints)
+        if self._candidates is not None:  # every candidate, to be scored
+            value, d1, d2, estimates = candidates(times, values, target_s, self._half_widths, derivative)
+            self._candidates[:, joints] = estimates
+            available = np.isfinite(estimates)
+            chosen, error = self._scores.choose(available, joints)
+        else:  # only the chosen ones
+            available = usable(times, target_s, self._half_widths)[:, None]
+            chosen, error = self._scores.choose(available, joints)
+            only = np.unique(chosen[chosen >= 0])
+            value, d1, d2, _ = candidates(times, values, target_s, self._half_widths, derivative, only)
+        known = chosen >= 0
+        columns = np.arange(len(joints))
+        pick = np.maximum(chosen, 0)
+        fitted, first, second = value[pick, columns], d1[pick, columns], d2[pick, columns]
+        # strained: the smallest window of its degree that the samples allow (the next candidate is the next
+        # degree's, or not usable)
+        after = np.minimum(pick + 1, len(available) - 1)
+        every = np.broadcast_to(available, (len(available), len(joints)))
+        smallest = (pick % LEVELS == LEVELS - 1) | ~every[after, columns]
+        if known.all():
+            return fitted, first, second, error, smallest
+        rule = adaptive_fit(times, values, target_s, self.settings.window / 2.0, self.settings.degree, 0.0, derivative)
+        ours = (fitted, first, second, error, smallest)
+        return tuple(np.where(known, mine, its) for mine, its in zip(ours, rule, strict=True))
+
+    def _score(self, now: int) -> None:
+        """Score the candidates' estimates that are now half a window old against the centred fit there."""
+        for stamp, estimates in self._scores.due(now):
+            reference = np.full(len(self.joint_names), np.nan)
+            for group in self._groups:
+                reference[group.joints] = self._reference(stamp, group)
+            self._scores.score(stamp, estimates, reference)
+
+    def _reference(self, stamp: int, group: JointHistory) -> np.ndarray:
+        """The default setting's centred estimate of q'' at ``stamp`` for the group's joints (NaN where its
+        samples do not cover it), the reference the causal candidates are scored against."""
+        stamps = group.stamps
+        support = self._reference_support
+        if uncovered(stamps, stamp, support, group.holes, group.end_slack(), group.left_out) is not None:
+            return np.full(len(group.joints), np.nan)
+        half = self.settings.window / 2.0
+        half_ns = round(half * NS)
+        lo = int(stamps.searchsorted(stamp - half_ns, side="left"))
+        hi = int(stamps.searchsorted(stamp + half_ns, side="right"))
+        positions, velocities = group.positions[lo:hi], group.velocities[lo:hi]
+        by_velocity = np.zeros(len(group.joints), dtype=bool)
+        if group.velocities_everywhere_after(lo):
+            by_velocity = np.isfinite(velocities).all(axis=0)
+        values = np.where(by_velocity, velocities, positions)
+        derivative = np.where(by_velocity, 1, 2)
+        order, lower = degrees(None, True, False)
+        _, d1, d2, _, _ = adaptive_fit(
+            group.seconds[lo:hi], values, (stamp - self._origin) / NS, half, order, half, derivative, lower
+        )
+        return np.where(by_velocity, d1, d2)
 
     # -- consistency --------------------------------------------------------------------------
 
