@@ -13,8 +13,7 @@ import numpy as np
 import pytest
 
 from neforward_ros.estimation import causal_choice
-from neforward_ros.estimation.adaptive import ladder
-from neforward_ros.estimation.causal_choice import DEGREES, ErrorScores, candidates, usable
+from neforward_ros.estimation.causal_choice import DEGREES, ErrorScores, candidates, half_widths, usable
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
 
@@ -30,14 +29,14 @@ def test_each_candidate_is_the_least_squares_polynomial_of_its_window() -> None:
     t = np.sort(rng.uniform(0.0, 0.2, 90))
     values = np.stack([np.sin(7.0 * t), np.cos(3.0 * t) + rng.normal(0.0, 1e-3, len(t)), t**4], axis=1)
     target = float(t[-1])
-    half_widths = ladder(0.1)
+    widths = half_widths(0.1)
     derivative = np.array([2, 2, 1])
-    value, first, second, estimate = candidates(t, values, target, half_widths, derivative)
+    value, first, second, estimate, variance = candidates(t, values, target, widths, derivative)
     for k, degree in enumerate(DEGREES):
-        for level, half in enumerate(half_widths):
-            row = k * len(half_widths) + level
+        for level, half in enumerate(widths):
+            row = k * len(widths) + level
             inside = t >= target - 2.0 * half
-            if np.count_nonzero(inside) < degree + 2:
+            if np.count_nonzero(inside) < degree + causal_choice.EXTRA:
                 assert np.isnan(second[row]).all()
                 continue
             for column in range(3):
@@ -46,9 +45,13 @@ def test_each_candidate_is_the_least_squares_polynomial_of_its_window() -> None:
                 got = [value[row, column], first[row, column], second[row, column]]
                 np.testing.assert_allclose(got, expected, rtol=1e-6, atol=1e-6 * (1.0 + np.abs(expected[2])))
             np.testing.assert_array_equal(estimate[row], np.where(derivative == 2, second[row], first[row]))
-    assert np.array_equal(usable(t, target, half_widths), np.isfinite(second[:, 0]))
+            # the estimates' weights on the samples, from the pseudo-inverse: their squares sum to the variance
+            weights = np.linalg.pinv(np.vander(t[inside] - target, degree + 1, increasing=True))
+            expected_variance = [np.sum(weights[1] ** 2), np.sum((2.0 * weights[2]) ** 2)]
+            np.testing.assert_allclose(variance[row], np.where(derivative == 2, *expected_variance[::-1]), rtol=1e-6)
+    assert np.array_equal(usable(t, target, widths), np.isfinite(second[:, 0]))
     only = np.array([3, 17])
-    part = candidates(t, values, target, half_widths, derivative, only)[2]
+    part = candidates(t, values, target, widths, derivative, only)[2]
     np.testing.assert_allclose(part[only], second[only], rtol=1e-9)
     assert np.isnan(np.delete(part, only, axis=0)).all()
 
@@ -61,8 +64,9 @@ def test_scores_weigh_two_memories_and_forget_a_restarted_joint(monkeypatch) -> 
     scores = ErrorScores(joints=2, count=3, memory=0.1, delay_ns=10**8)
     first = np.array([[2.0, 0.0], [2.0 + np.sqrt(1.5), 0.0], [np.nan, 0.0]])
     second = np.array([[3.0, 0.0], [2.0 + np.sqrt(0.3), 0.0], [4.0, 0.0]])
-    scores.score(0, first, np.array([2.0, np.nan]))  # joint 1 has no reference: not scored
-    scores.score(10**8, second, np.array([2.0, 0.5]))
+    none = np.zeros((3, 2))
+    scores.score(0, first, none, np.array([2.0, np.nan]))  # joint 1 has no reference: not scored
+    scores.score(10**8, second, none, np.array([2.0, 0.5]))
 
     def mean(e1: float, e2: float, memory: float) -> float:
         w = np.exp(-0.1 / memory)
@@ -79,12 +83,24 @@ def test_scores_weigh_two_memories_and_forget_a_restarted_joint(monkeypatch) -> 
     # candidate 2 scored once (weight 1 against 1 + exp(-0.1) over the long memory): fair, at least half
     chosen, error = scores.choose(np.array([[False], [False], [True]]), np.array([0]))
     assert chosen[0] == 2 and error[0] == pytest.approx(2.0)
-    scores.keep(2 * 10**8, np.ones((3, 2)))
+    scores.keep(2 * 10**8, np.ones((3, 2)), none)
     scores.clear([0])
     chosen, error = scores.choose(np.ones((3, 1), dtype=bool), np.array([0, 1]))
     assert chosen[0] == -1 and np.isnan(error[0]) and chosen[1] == 0
     assert np.isnan(scores.waiting[0][1][:, 0]).all() and (scores.waiting[0][1][:, 1] == 1.0).all()
     assert not scores.wants(2 * 10**8 + 10**6) and scores.wants(2 * 10**8 + 5 * 10**6)
+
+
+def test_a_joint_at_rest_ranks_the_candidates_by_their_noise(monkeypatch) -> None:
+    """Every candidate exactly right (readings that do not change): the floors, each candidate's
+    variance for the least noise, decide, and the least noisy is chosen whatever its index."""
+    monkeypatch.setattr(causal_choice, "LEAST_RECORD", 1.0)
+    scores = ErrorScores(joints=1, count=3, memory=0.1, delay_ns=10**8)
+    floors = np.array([[3e-12], [1e-14], [2e-9]])
+    for k in range(5):
+        scores.score(k * 10**7, np.zeros((3, 1)), floors, np.zeros(1))
+    chosen, error = scores.choose(np.ones((3, 1), dtype=bool), np.array([0]))
+    assert chosen[0] == 1 and error[0] == pytest.approx(1e-7)
 
 
 def causal_ratio(kind: str, rate: float, bits: int, seed: int) -> float:
@@ -115,8 +131,10 @@ def test_the_causal_fit_is_within_1_5x_of_hindsight(kind: str, rate: float, bits
 def test_the_adaptive_rule_alone_fails_the_same_check(monkeypatch) -> None:
     """The planted bug: every joint without a record, so the intersection-of-confidence-intervals rule
     chooses, as before the scores: the same check fails on most of the cases."""
-    monkeypatch.setattr(
-        causal_choice.ErrorScores, "choose", lambda self, available, joints: (np.full(len(joints), -1), None)
-    )
+
+    def no_record(self, available: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return np.full(len(joints), -1), np.full(len(joints), np.nan)
+
+    monkeypatch.setattr(causal_choice.ErrorScores, "choose", no_record)
     ratios = [causal_ratio(*case) for case in CASES]
     assert sum(ratio > 1.5 for ratio in ratios) >= 3, ratios

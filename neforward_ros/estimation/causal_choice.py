@@ -10,8 +10,9 @@ window and degree chosen knowing the truth (``bench/bench_estimator_family.py``)
 A causal estimate's error can be told afterwards, though. Half a window after a sample, the centred
 fit of the default setting (its window reaching half a window each way, the adaptive rule choosing
 it) estimates q'' there several times more accurately than any one-sided fit: it serves as the
-truth. So every estimate fits a fixed set of candidates: degrees :data:`DEGREES` on each half-width of
-the adaptive rule's ladder whose window holds at least degree + 2 samples, and keeps their
+truth. So every estimate fits a fixed set of candidates: degrees :data:`DEGREES` on each of
+:data:`LEVELS` half-widths (:func:`half_widths`) whose window holds at least degree + :data:`EXTRA` samples,
+and keeps their
 estimates (at most :data:`SCORED_PER_MEMORY` per half window); once an estimate is half a window old,
 each candidate's is scored against the centred fit there. Per joint, each candidate keeps two
 exponentially weighted means of its squared errors (:class:`ErrorScores`): over a short memory, half
@@ -37,6 +38,15 @@ import numpy as np
 
 DEGREES = (2, 3, 4, 5)
 """The candidates' polynomial degrees."""
+RATIO = 2.0**0.25
+"""Between the candidates' consecutive half-widths (the adaptive rule's ladder, :data:`~.adaptive.RATIO`,
+with a level between each two: at 100 Hz its windows hold 21, 15, 11, 8 and 6 samples, and a 5 Hz
+motion's best, 7 samples of degree 5, falls between)."""
+LEVELS = 20
+EXTRA = 1
+"""Samples a candidate's window holds at least, beyond its degree: 1, the interpolating polynomial
+(at a fine encoder's 100 Hz, a 5 Hz motion's best is degree 5 through 6 or 7 samples)."""
+"""Half-widths of the candidates, the largest half the estimator's window."""
 SCORED_PER_MEMORY = 20
 """Estimates scored per memory time constant at most (an estimate is kept for scoring only once that
 share of the memory has passed since the last one kept: at 1 kHz about every fifth, at 100 Hz each)."""
@@ -53,6 +63,11 @@ LEAST_WEIGHT = 0.5
 candidate's (a window that was too short for most of the recent samples has no fair record)."""
 
 
+def half_widths(largest: float) -> np.ndarray:
+    """The candidates' half-widths (LEVELS,), s, largest first."""
+    return largest / RATIO ** np.arange(LEVELS)
+
+
 @lru_cache(maxsize=16)
 def _layout(half_widths: tuple[float, ...]) -> tuple[np.ndarray, ...]:
     """Per candidate (degree by degree, then level): its level (C,), the coefficients its degree uses
@@ -67,9 +82,9 @@ def _layout(half_widths: tuple[float, ...]) -> tuple[np.ndarray, ...]:
 
 
 def usable(times: np.ndarray, target: float, half_widths: np.ndarray) -> np.ndarray:
-    """Which candidates' windows hold enough samples (C,): at least degree + 2 (see :func:`candidates`)."""
+    """Which candidates' windows hold enough samples (C,): at least degree + :data:`EXTRA`."""
     lo = times.searchsorted(target - 2.0 * half_widths, side="left")
-    return (len(times) - lo)[_layout(tuple(half_widths))[0]] >= np.repeat(np.array(DEGREES), len(half_widths)) + 2
+    return (len(times) - lo)[_layout(tuple(half_widths))[0]] >= np.repeat(np.array(DEGREES), len(half_widths)) + EXTRA
 
 
 def candidates(
@@ -79,7 +94,7 @@ def candidates(
     half_widths: np.ndarray,
     derivative: np.ndarray,
     only: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every candidate's one-sided fit at ``target``, the newest of the samples or after it (or only
     those of the indices ``only``, the others NaN).
 
@@ -91,21 +106,22 @@ def candidates(
         derivative: (n,) 2 for a column of positions, 1 for one of velocities.
 
     Returns:
-        value, first and second derivative at ``target``, and the estimate of q'' (the
-        ``derivative``-th), each (C, n) for C = len(DEGREES) * L candidates, degree by degree and
-        largest window first; NaN where a window holds fewer than degree + 2 samples.
+        value, first and second derivative at ``target``, the estimate of q'' (the
+        ``derivative``-th), and that estimate's variance for samples of unit white noise, each (C, n)
+        for C = len(DEGREES) * L candidates, degree by degree and largest window first; NaN where a
+        window holds fewer than degree + :data:`EXTRA` samples.
     """
     lo = times.searchsorted(target - 2.0 * half_widths, side="left")
     level, used, square, hankel, scale = _layout(tuple(half_widths))
-    fitted = (len(times) - lo)[level] >= np.repeat(np.array(DEGREES), len(half_widths)) + 2  # (C,): usable
+    fitted = (len(times) - lo)[level] >= np.repeat(np.array(DEGREES), len(half_widths)) + EXTRA  # (C,): usable
     if only is not None:
         wanted = np.zeros(len(level), dtype=bool)
         wanted[only] = True
         fitted &= wanted
     rows = np.flatnonzero(fitted)
-    out = np.full((4, len(level), values.shape[1]), np.nan)
+    out = np.full((5, len(level), values.shape[1]), np.nan)
     if not len(rows):
-        return out[0], out[1], out[2], out[3]
+        return out[0], out[1], out[2], out[3], out[4]
     needed = np.unique(level[rows])  # the levels fitted
     at = np.searchsorted(needed, level[rows])  # each fitted candidate's among them
     tau = (times[None, :] - target) / half_widths[needed, None]  # (L', W)
@@ -124,11 +140,13 @@ def candidates(
     inverse = np.linalg.inv(gram)[:, :3]  # value, first and second derivative's rows (every degree >= 2)
     coefficients = np.einsum("cij,cjn->cin", inverse, moments[at] * used[rows])  # (C', 3, n)
     h = scale[rows]
+    first, second = inverse[:, 1, 1, None] / (h * h), 4.0 * inverse[:, 2, 2, None] / (h * h) ** 2
     out[0, rows] = coefficients[:, 0]
     out[1, rows] = coefficients[:, 1] / h
     out[2, rows] = 2.0 * coefficients[:, 2] / (h * h)
     out[3] = np.where(derivative == 2, out[2], out[1])
-    return out[0], out[1], out[2], out[3]
+    out[4, rows] = np.where(derivative == 2, second, first)
+    return out[0], out[1], out[2], out[3], out[4]
 
 
 class ErrorScores:
@@ -150,7 +168,7 @@ class ErrorScores:
         self._total = np.zeros((2, count, joints))
         self._weight = np.zeros((2, count, joints))
         self._last = np.full(joints, -1, dtype=np.int64)  # the stamp last scored per joint; -1: none
-        self.waiting: deque[tuple[int, np.ndarray]] = deque()
+        self.waiting: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
         self._kept: int | None = None  # the stamp of the last estimates kept
 
     def clear(self, joints: list[int] | None = None) -> None:
@@ -163,7 +181,7 @@ class ErrorScores:
             self.waiting.clear()
             self._kept = None
         else:
-            for _, estimates in self.waiting:
+            for _, estimates, _ in self.waiting:
                 estimates[:, joints] = np.nan
 
     def wants(self, stamp_ns: int) -> bool:
@@ -171,21 +189,26 @@ class ErrorScores:
         made at least :data:`SCORED_PER_MEMORY`'s spacing after the last kept."""
         return self._kept is None or stamp_ns - self._kept >= self._spacing_ns
 
-    def keep(self, stamp_ns: int, estimates: np.ndarray) -> None:
-        """Keep the candidates' estimates (C, joints) made at ``stamp_ns`` (NaN where none) until scored."""
-        self.waiting.append((stamp_ns, estimates))
+    def keep(self, stamp_ns: int, estimates: np.ndarray, floors: np.ndarray) -> None:
+        """Keep the candidates' estimates (C, joints) made at ``stamp_ns`` (NaN where none) until scored,
+        with the least squared error each is scored with (C, joints): see :meth:`score`."""
+        self.waiting.append((stamp_ns, estimates, floors))
         self._kept = stamp_ns
 
-    def due(self, now_ns: int) -> list[tuple[int, np.ndarray]]:
+    def due(self, now_ns: int) -> list[tuple[int, np.ndarray, np.ndarray]]:
         """The waiting estimates whose reference can be made at ``now_ns`` (taken off the queue)."""
         out = []
         while self.waiting and self.waiting[0][0] <= now_ns - self.delay_ns:
             out.append(self.waiting.popleft())
         return out
 
-    def score(self, stamp_ns: int, estimates: np.ndarray, reference: np.ndarray) -> None:
+    def score(self, stamp_ns: int, estimates: np.ndarray, floors: np.ndarray, reference: np.ndarray) -> None:
         """Score the candidates' ``estimates`` (C, joints) made at ``stamp_ns`` against ``reference``
-        (joints,), NaN where a joint has none."""
+        (joints,), NaN where a joint has none: each squared error plus its ``floors`` (C, joints), the
+        candidate's variance for the least noise (that of :data:`~.adaptive.FLOOR`): a joint at rest
+        whose readings do not change gives every candidate an error of rounding size, and a record of
+        those alone would rank them at random; the floors rank them by their noise (the next move's
+        first samples then meet the least noisy, not a short window of degree 5)."""
         joints = np.flatnonzero(np.isfinite(reference))
         if not len(joints):
             return
@@ -193,7 +216,8 @@ class ErrorScores:
         decay = np.where(last >= 0, np.exp(-(stamp_ns - last) / self._memory_ns), 0.0)[:, None, :]  # (2, 1, m)
         error = estimates[:, joints] - reference[joints]
         scored = np.isfinite(error)
-        self._total[:, :, joints] = decay * self._total[:, :, joints] + np.where(scored, error * error, 0.0)
+        squared = np.where(scored, error * error + floors[:, joints], 0.0)
+        self._total[:, :, joints] = decay * self._total[:, :, joints] + squared
         self._weight[:, :, joints] = decay * self._weight[:, :, joints] + scored
         self._last[joints] = stamp_ns
 

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 from neforward_ros.errors import InputError
 from neforward_ros.estimation import fit
+from neforward_ros.estimation.causal_choice import DEGREES
 from neforward_ros.estimation.coverage import Support
 from neforward_ros.estimation.fit import DEFAULT_WINDOW, degrees
 from neforward_ros.estimation.motion import KalmanSettings
@@ -31,9 +32,12 @@ class StreamSettings:
         window: polyfit: full width of the local fit, s. kalman: the stretch of recent samples an
             estimate needs before its stamp (its warm-up), s.
         order: polynomial degree (polyfit); None: :attr:`degree`'s default, 6 fused with 4 for adaptive
-            windows reaching past the estimate (a fixed lag), 4 for a fixed window or a causal fit.
+            windows reaching past the estimate (a fixed lag), 4 for a fixed window; an adaptive causal
+            fit chooses among degrees 2-5 (:mod:`.causal_choice`).
         adaptive: polyfit: each joint's window chosen per estimate, up to ``window``, by the
-            intersection-of-confidence-intervals rule (:mod:`.adaptive`); False: always ``window``.
+            intersection-of-confidence-intervals rule (:mod:`.adaptive`); in causal mode with no
+            ``order``, window and degree chosen by how each candidate fared half a window before
+            (:mod:`.causal_choice`); False: always ``window``.
         mode: ``"causal"``: each estimate refers to the newest sample (lowest latency).
             ``"fixed_lag"``: each estimate refers to the sample ``lag`` seconds before the newest and
             is stamped with that sample's stamp.
@@ -110,6 +114,11 @@ class StreamSettings:
             )
             degree = f"degrees {self.lower_degree} and {self.degree}" if self.lower_degree else f"degree {self.degree}"
             what = f"polyfit ({size}, {degree})"
+            if self.adaptive and self.order is None and self.effective_lag == 0.0:
+                what = (
+                    f"polyfit (windows up to {self.window:g} s and degrees {DEGREES[0]}-{DEGREES[-1]}, chosen per "
+                    "joint by their errors half a window before)"
+                )
         else:
             what = f"difference (window {self.window:g} s)"
         lag = self.effective_lag

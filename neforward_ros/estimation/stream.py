@@ -23,8 +23,8 @@ import numpy as np
 
 from neforward_ros.errors import InputError
 from neforward_ros.estimation import native_fit
-from neforward_ros.estimation.adaptive import LEVELS, DeviationPool, adaptive_fit, ladder
-from neforward_ros.estimation.causal_choice import DEGREES, ErrorScores, candidates, usable
+from neforward_ros.estimation.adaptive import FLOOR, GAMMA, DeviationPool, adaptive_fit
+from neforward_ros.estimation.causal_choice import DEGREES, ErrorScores, candidates, half_widths, usable
 from neforward_ros.estimation.coverage import uncovered
 from neforward_ros.estimation.estimate import JointEstimate
 from neforward_ros.estimation.fit import degrees, fit_window, local_difference
@@ -110,12 +110,15 @@ class StreamingEstimator:
             self._pool = DeviationPool(self.settings.window, len(self.joint_names))
         # polyfit's causal adaptive fits: the candidate chosen by its errors half a window ago (.causal_choice)
         self._scores: ErrorScores | None = None
-        # every candidate's estimates at the target being estimated, where kept for scoring (else None)
+        # every candidate's estimates at the target being estimated and their floors (see ErrorScores.score),
+        # where kept for scoring (else None)
         self._candidates: np.ndarray | None = None
-        if self.settings.method == "polyfit" and self.settings.adaptive and self._lag_ns == 0:
+        chosen = self.settings.method == "polyfit" and self.settings.adaptive and self.settings.order is None
+        if chosen and self._lag_ns == 0:  # (an explicit order: that degree alone, the adaptive rule's windows)
             half = self.settings.window / 2.0
-            self._half_widths = ladder(half)
-            self._scores = ErrorScores(len(self.joint_names), len(DEGREES) * LEVELS, half, round(half * NS))
+            self._half_widths = half_widths(half)
+            count = len(DEGREES) * len(self._half_widths)
+            self._scores = ErrorScores(len(self.joint_names), count, half, round(half * NS))
             self._reference_support = StreamSettings(window=self.settings.window).support
         self._intervals: deque[int] = deque(maxlen=8)  # the last stamp intervals, ns
         # Per joint, how hard the estimator strains (see _watch_windows, _watch_innovations).
@@ -358,13 +361,13 @@ class StreamingEstimator:
         if self._scores is not None:
             self._score(target)
             keeping = self._scores.wants(target)
-            self._candidates = np.full((len(DEGREES) * LEVELS, n), np.nan) if keeping else None
+            self._candidates = np.full((2, len(DEGREES) * len(self._half_widths), n), np.nan) if keeping else None
         for group in self._groups:
             self._estimate_group(target, group, state, ages)
             if group.track is not None:
                 group.track.forget_before(target)
         if self._candidates is not None:
-            self._scores.keep(target, self._candidates)
+            self._scores.keep(target, *self._candidates)
         ready = np.isfinite(state[:, :3]).all(axis=1)
         if not ready.all():
             state[~ready, :3] = np.nan
@@ -486,15 +489,16 @@ class StreamingEstimator:
         estimate's standard deviation and whether it took the smallest window its degree allows (m,)."""
         joints = np.asarray(group.joints)
         if self._candidates is not None:  # every candidate, to be scored
-            value, d1, d2, estimates = candidates(times, values, target_s, self._half_widths, derivative)
-            self._candidates[:, joints] = estimates
+            value, d1, d2, estimates, variance = candidates(times, values, target_s, self._half_widths, derivative)
+            least = FLOOR * np.maximum(np.abs(values[-1]), 1.0)  # the least noise: adaptive.accel_std's floor
+            self._candidates[:, :, joints] = estimates, variance * least * least
             available = np.isfinite(estimates)
             chosen, error = self._scores.choose(available, joints)
         else:  # only the chosen ones
             available = usable(times, target_s, self._half_widths)[:, None]
             chosen, error = self._scores.choose(available, joints)
             only = np.unique(chosen[chosen >= 0])
-            value, d1, d2, _ = candidates(times, values, target_s, self._half_widths, derivative, only)
+            value, d1, d2, _, _ = candidates(times, values, target_s, self._half_widths, derivative, only)
         known = chosen >= 0
         columns = np.arange(len(joints))
         pick = np.maximum(chosen, 0)
@@ -503,20 +507,24 @@ class StreamingEstimator:
         # degree's, or not usable)
         after = np.minimum(pick + 1, len(available) - 1)
         every = np.broadcast_to(available, (len(available), len(joints)))
-        smallest = (pick % LEVELS == LEVELS - 1) | ~every[after, columns]
-        if known.all():
-            return fitted, first, second, error, smallest
+        levels = len(self._half_widths)
+        smallest = (pick % levels == levels - 1) | ~every[after, columns]
         rule = adaptive_fit(times, values, target_s, self.settings.window / 2.0, self.settings.degree, 0.0, derivative)
-        ours = (fitted, first, second, error, smallest)
-        return tuple(np.where(known, mine, its) for mine, its in zip(ours, rule, strict=True))
+        # the rule's where a joint has no record, or where the chosen candidate's estimate leaves the rule's
+        # interval (the motion changed since the record was made: a move starts after a dwell)
+        ours = np.where(derivative == 2, second, first)
+        theirs = np.where(derivative == 2, rule[2], rule[1])
+        known &= np.abs(ours - theirs) <= GAMMA * np.hypot(rule[3], error)
+        mine = (fitted, first, second, error, smallest)
+        return tuple(np.where(known, a, b) for a, b in zip(mine, rule, strict=True))
 
     def _score(self, now: int) -> None:
         """Score the candidates' estimates that are now half a window old against the centred fit there."""
-        for stamp, estimates in self._scores.due(now):
+        for stamp, estimates, floors in self._scores.due(now):
             reference = np.full(len(self.joint_names), np.nan)
             for group in self._groups:
                 reference[group.joints] = self._reference(stamp, group)
-            self._scores.score(stamp, estimates, reference)
+            self._scores.score(stamp, estimates, floors, reference)
 
     def _reference(self, stamp: int, group: JointHistory) -> np.ndarray:
         """The default setting's centred estimate of q'' at ``stamp`` for the group's joints (NaN where its
