@@ -12,8 +12,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from neforward_ros.estimation import causal_choice
-from neforward_ros.estimation.causal_choice import DEGREES, ErrorScores, candidates, half_widths, usable
+from neforward_ros.estimation import causal_choice, native_fit
+from neforward_ros.estimation.causal_choice import (
+    DEGREES,
+    ErrorScores,
+    candidates,
+    half_widths,
+    python_candidates,
+    usable,
+)
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
 
@@ -31,7 +38,7 @@ def test_each_candidate_is_the_least_squares_polynomial_of_its_window() -> None:
     target = float(t[-1])
     widths = half_widths(0.1)
     derivative = np.array([2, 2, 1])
-    value, first, second, estimate, variance = candidates(t, values, target, widths, derivative)
+    value, first, second, estimate, variance = python_candidates(t, values, target, widths, derivative)
     for k, degree in enumerate(DEGREES):
         for level, half in enumerate(widths):
             row = k * len(widths) + level
@@ -51,9 +58,29 @@ def test_each_candidate_is_the_least_squares_polynomial_of_its_window() -> None:
             np.testing.assert_allclose(variance[row], np.where(derivative == 2, *expected_variance[::-1]), rtol=1e-6)
     assert np.array_equal(usable(t, target, widths), np.isfinite(second[:, 0]))
     only = np.array([3, 17])
-    part = candidates(t, values, target, widths, derivative, only)[2]
+    part = python_candidates(t, values, target, widths, derivative, only)[2]
     np.testing.assert_allclose(part[only], second[only], rtol=1e-9)
     assert np.isnan(np.delete(part, only, axis=0)).all()
+
+
+@pytest.mark.parametrize("rate", [100.0, 1000.0])
+def test_the_compiled_candidates_are_numpys_to_rounding(rate: float) -> None:
+    """The node's C candidates (native_fit.causal_candidates) against the numpy ones: the same
+    candidates fitted, each estimate within 1e-9 of its own noise (its deviation for samples of that
+    deviation), however ill-conditioned (degree 5 through 6 samples)."""
+    if native_fit.FIT.get(wait=True) is None:
+        pytest.skip("no C compiler: numpy serves the candidates")
+    rng = np.random.default_rng(int(rate))
+    t = np.sort(rng.uniform(0.0, 0.2, int(0.2 * rate) + 1))
+    values = np.stack([np.sin(7.0 * t), np.cos(3.0 * t) + rng.normal(0.0, 1e-4, len(t)), 1.0 + t], axis=1)
+    derivative = np.array([2, 1, 2])
+    widths = half_widths(0.1)
+    for only in (None, np.array([2, 33, 70])):
+        ours, numpy_ones = (f(t, values, t[-1], widths, derivative, only) for f in (candidates, python_candidates))
+        np.testing.assert_array_equal(np.isfinite(ours[3]), np.isfinite(numpy_ones[3]))
+        np.testing.assert_allclose(ours[4], numpy_ones[4], rtol=1e-6)
+        noise = np.sqrt(np.nan_to_num(numpy_ones[4])) * 1e-9
+        assert (np.nan_to_num(np.abs(ours[3] - numpy_ones[3])) <= noise + 1e-12).all()
 
 
 def test_scores_weigh_two_memories_and_forget_a_restarted_joint(monkeypatch) -> None:
@@ -61,12 +88,15 @@ def test_scores_weigh_two_memories_and_forget_a_restarted_joint(monkeypatch) -> 
     (exp(-0.1 / m) + 1). Candidate 0 errs 0 then 1, candidate 1 1.5 then 0.3 (squared): over the short
     memory (0.1 s) candidate 1 is better, over the long one (1 s) candidate 0, and the sum picks 0."""
     assert causal_choice.LONG_MEMORY == 1.0
-    scores = ErrorScores(joints=2, count=3, memory=0.1, delay_ns=10**8)
     first = np.array([[2.0, 0.0], [2.0 + np.sqrt(1.5), 0.0], [np.nan, 0.0]])
     second = np.array([[3.0, 0.0], [2.0 + np.sqrt(0.3), 0.0], [4.0, 0.0]])
     none = np.zeros((3, 2))
-    scores.score(0, first, none, np.array([2.0, np.nan]))  # joint 1 has no reference: not scored
-    scores.score(10**8, second, none, np.array([2.0, 0.5]))
+
+    def scored() -> ErrorScores:
+        scores = ErrorScores(joints=2, count=3, memory=0.1, delay_ns=10**8)
+        scores.score(0, first, none, np.array([2.0, np.nan]))  # joint 1 has no reference: not scored
+        scores.score(10**8, second, none, np.array([2.0, 0.5]))
+        return scores
 
     def mean(e1: float, e2: float, memory: float) -> float:
         w = np.exp(-0.1 / memory)
@@ -74,9 +104,10 @@ def test_scores_weigh_two_memories_and_forget_a_restarted_joint(monkeypatch) -> 
 
     assert mean(1.5, 0.3, 0.1) < mean(0.0, 1.0, 0.1) and mean(0.0, 1.0, 1.0) < mean(1.5, 0.3, 1.0)
     assert mean(0.0, 1.0, 0.1) + mean(0.0, 1.0, 1.0) < mean(1.5, 0.3, 0.1) + mean(1.5, 0.3, 1.0)
-    chosen, error = scores.choose(np.ones((3, 1), dtype=bool), np.array([0, 1]))
+    chosen, error = scored().choose(np.ones((3, 1), dtype=bool), np.array([0, 1]))
     assert (chosen == -1).all() and np.isnan(error).all()  # two scores are no record yet
     monkeypatch.setattr(causal_choice, "LEAST_RECORD", 1.0)
+    scores = scored()
     chosen, error = scores.choose(np.ones((3, 1), dtype=bool), np.array([0, 1]))
     assert chosen[0] == 0 and error[0] == pytest.approx(np.sqrt(mean(0.0, 1.0, 0.1)))
     assert chosen[1] == 0 and error[1] == pytest.approx(0.5)  # scored once, all alike: the first

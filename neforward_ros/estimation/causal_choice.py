@@ -36,6 +36,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from neforward_ros.estimation import native_fit
+
 DEGREES = (2, 3, 4, 5)
 """The candidates' polynomial degrees."""
 RATIO = 2.0**0.25
@@ -110,7 +112,34 @@ def candidates(
         ``derivative``-th), and that estimate's variance for samples of unit white noise, each (C, n)
         for C = len(DEGREES) * L candidates, degree by degree and largest window first; NaN where a
         window holds fewer than degree + :data:`EXTRA` samples.
+
+    In one C call once compiled (:func:`~neforward_ros.estimation.native_fit.causal_candidates`: the
+    windows' power sums added ring by ring, each system solved by Cholesky), else in numpy
+    (:func:`python_candidates`); the two agree to rounding.
     """
+    library = native_fit.FIT.get()
+    if library is not None:
+        wanted = None
+        if only is not None:
+            wanted = np.zeros(len(DEGREES) * len(half_widths), dtype=bool)
+            wanted[only] = True
+        got = native_fit.causal_candidates(library, times, values, target, half_widths, DEGREES, EXTRA, derivative,
+                                           wanted)  # fmt: skip
+        if got is not None:
+            value, first, second, variance = (got[:, :, q] for q in range(4))
+            return value, first, second, np.where(derivative == 2, second, first), variance
+    return python_candidates(times, values, target, half_widths, derivative, only)
+
+
+def python_candidates(
+    times: np.ndarray,
+    values: np.ndarray,
+    target: float,
+    half_widths: np.ndarray,
+    derivative: np.ndarray,
+    only: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`candidates` in numpy: one batch of normal equations for every candidate fitted."""
     lo = times.searchsorted(target - 2.0 * half_widths, side="left")
     level, used, square, hankel, scale = _layout(tuple(half_widths))
     fitted = (len(times) - lo)[level] >= np.repeat(np.array(DEGREES), len(half_widths)) + EXTRA  # (C,): usable
@@ -170,6 +199,7 @@ class ErrorScores:
         self._last = np.full(joints, -1, dtype=np.int64)  # the stamp last scored per joint; -1: none
         self.waiting: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
         self._kept: int | None = None  # the stamp of the last estimates kept
+        self._ranking: tuple[np.ndarray, np.ndarray] | None = None  # see _rank; None: to be worked out
 
     def clear(self, joints: list[int] | None = None) -> None:
         """Forget the scores and waiting estimates of these joints (all: None), whose history restarted."""
@@ -177,6 +207,7 @@ class ErrorScores:
         self._total[:, :, columns] = 0.0
         self._weight[:, :, columns] = 0.0
         self._last[columns] = -1
+        self._ranking = None
         if joints is None:
             self.waiting.clear()
             self._kept = None
@@ -220,6 +251,7 @@ class ErrorScores:
         self._total[:, :, joints] = decay * self._total[:, :, joints] + squared
         self._weight[:, :, joints] = decay * self._weight[:, :, joints] + scored
         self._last[joints] = stamp_ns
+        self._ranking = None
 
     def choose(self, available: np.ndarray, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """For these joints (m,), the candidates ``available`` now ((C, m) or (C, 1), bool): (the chosen
@@ -227,12 +259,23 @@ class ErrorScores:
         root mean square error over the short memory (m,)); -1 and NaN where a joint has no fair record
         (its most scored candidate's weigh less than :data:`LEAST_RECORD`), and a candidate whose scores weigh
         less than :data:`LEAST_WEIGHT` of those is not chosen."""
-        weight = self._weight[:, :, joints]  # (2, C, m)
-        fair = available & (weight > 0.0).all(axis=0)
-        most = weight[1].max(axis=0, initial=0.0)
-        fair &= (weight[1] >= LEAST_WEIGHT * most) & (most >= LEAST_RECORD)
-        mean = np.where(fair, self._total[:, :, joints] / np.where(fair, weight, 1.0), np.inf)
-        chosen = np.argmin(mean[0] + mean[1], axis=0)
-        error = mean[0, chosen, np.arange(len(joints))]
-        known = np.isfinite(error)
-        return np.where(known, chosen, -1), np.where(known, np.sqrt(error), np.nan)
+        if self._ranking is None:
+            self._ranking = self._rank()
+        order, rms = self._ranking  # (C, joints) each: candidates best first, and their short RMS errors
+        columns = np.arange(len(joints))
+        ranked, errors = order[:, joints], rms[:, joints]
+        now = available[ranked, columns] if available.shape[1] > 1 else available[ranked, 0]
+        ok = np.isfinite(errors) & now
+        first = np.argmax(ok, axis=0)
+        known = ok[first, columns]
+        return np.where(known, ranked[first, columns], -1), np.where(known, errors[first, columns], np.nan)
+
+    def _rank(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per joint, the candidates in order of their two means' sum (those without a fair record last)
+        and, in that order, their short memory's root mean square error (inf: no fair record)."""
+        weight = self._weight
+        most = weight[1].max(axis=0)
+        fair = (weight > 0.0).all(axis=0) & (weight[1] >= LEAST_WEIGHT * most) & (most >= LEAST_RECORD)
+        mean = np.where(fair, self._total / np.where(fair, weight, 1.0), np.inf)
+        order = np.argsort(mean[0] + mean[1], axis=0, kind="stable")
+        return order, np.sqrt(np.take_along_axis(mean[0], order, axis=0))

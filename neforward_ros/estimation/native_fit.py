@@ -383,6 +383,47 @@ void adaptive_fits(long count, const double *times, const double *values, long n
         free(pre);
     }
 }
+
+/* The causal candidates (estimation/causal_choice.py) at `target`, at or after the newest sample: level
+   l's window [target - 2 h_l, target] (levels largest first: nested, added ring by ring from the
+   smallest outwards, as fit_target does), degree degrees[k]; candidate c = k levels + l is fitted where
+   wanted is NULL or wanted[c], and its window holds at least degree + extra samples: value, first and
+   second derivative, and the derivative's variance factor for unit noise into out (C, n, 4); NaN
+   elsewhere. The samples' powers are in the largest window's unit, rescaled per level (level_fit). */
+void causal_candidates(long count, const double *times, const double *values, long n, double target,
+                       long nlevels, const double *levels, long ndeg, const long *degrees, long extra,
+                       const long *derivative, const unsigned char *wanted, double *out) {
+    long top = 0;
+    for (long k = 0; k < ndeg; k++) if (degrees[k] > top) top = degrees[k];
+    long hi = upper_bound(times, count, target), width = 2 * top + 1, rows = top + 1;
+    double h0 = levels[0];
+    double *sums = calloc((size_t)width, sizeof(double)), *moments = calloc((size_t)rows * n, sizeof(double));
+    double *fit = malloc((size_t)n * 5 * sizeof(double));
+    long next = hi;  /* the samples [next, hi) are in the running sums */
+    for (long c = 0; c < ndeg * nlevels * n * 4; c++) out[c] = NAN;
+    for (long l = nlevels - 1; l >= 0; l--) {
+        long lo = lower_bound(times, count, target - 2.0 * levels[l]);
+        for (long i = next - 1; i >= lo; i--) {
+            double u = (times[i] - target) / h0, power = 1.0;
+            for (long k = 0; k < width; k++) {
+                sums[k] += power;
+                if (k < rows) for (long j = 0; j < n; j++) moments[k * n + j] += power * values[i * n + j];
+                power *= u;
+            }
+        }
+        if (lo < next) next = lo;
+        for (long k = 0; k < ndeg; k++) {
+            long c = k * nlevels + l;
+            if ((wanted != NULL && !wanted[c]) || hi - lo < degrees[k] + extra) continue;
+            if (!level_fit(sums, moments, n, degrees[k], levels[l], h0, derivative, fit)) continue;
+            for (long j = 0; j < n; j++)
+                for (long q = 0; q < 4; q++) out[(c * n + j) * 4 + q] = fit[j * 5 + q];
+        }
+    }
+    free(sums);
+    free(moments);
+    free(fit);
+}
 """
 
 
@@ -450,6 +491,9 @@ def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
                                       long, long, pointer, double, double, double, double, double, double,
                                       pointer, pointer]  # fmt: skip
     library.adaptive_fits.restype = None
+    library.causal_candidates.argtypes = [long, pointer, pointer, long, double, long, pointer, long, pointer, long,
+                                          pointer, pointer, pointer]  # fmt: skip
+    library.causal_candidates.restype = None
     return library
 
 
@@ -543,6 +587,35 @@ def fits(
             for thread in threads:
                 thread.join()
     return out, status == 0
+
+
+def causal_candidates(
+    library: ctypes.CDLL,
+    times: np.ndarray,
+    values: np.ndarray,
+    target: float,
+    half_widths: np.ndarray,
+    degrees: tuple[int, ...],
+    extra: int,
+    derivative: np.ndarray,
+    wanted: np.ndarray | None = None,
+) -> np.ndarray | None:
+    """The C function's causal candidates (:func:`neforward_ros.estimation.causal_choice.candidates`):
+    value, first and second derivative and the derivative's variance factor (C, n, 4), NaN where a
+    candidate is not fitted; None above MAX_ORDER (numpy serves)."""
+    if max(degrees) > MAX_ORDER:
+        return None
+    times = np.ascontiguousarray(times, dtype=float)
+    values = np.ascontiguousarray(values, dtype=float)
+    n = values.shape[1]
+    out = np.empty((len(degrees) * len(half_widths), n, 4))
+    half_widths = np.ascontiguousarray(half_widths, dtype=float)
+    chosen = None if wanted is None else np.ascontiguousarray(wanted, dtype=np.uint8)
+    each, columns = _longs(np.array(degrees)), _longs(derivative)  # kept alive across the call
+    library.causal_candidates(len(times), times.ctypes.data, values.ctypes.data, n, float(target), len(half_widths),
+                              half_widths.ctypes.data, len(degrees), each.ctypes.data, extra, columns.ctypes.data,
+                              None if chosen is None else chosen.ctypes.data, out.ctypes.data)  # fmt: skip
+    return out
 
 
 PARALLEL_TARGETS = 20_000

@@ -113,6 +113,7 @@ class StreamingEstimator:
         # every candidate's estimates at the target being estimated and their floors (see ErrorScores.score),
         # where kept for scoring (else None)
         self._candidates: np.ndarray | None = None
+        self._overruled = np.zeros(len(self.joint_names), dtype=bool)  # the rule's estimate taken at the last check
         chosen = self.settings.method == "polyfit" and self.settings.adaptive and self.settings.order is None
         if chosen and self._lag_ns == 0:  # (an explicit order: that degree alone, the adaptive rule's windows)
             half = self.settings.window / 2.0
@@ -187,6 +188,7 @@ class StreamingEstimator:
             self._pool.clear()
         if self._scores is not None:
             self._scores.clear()
+            self._overruled[:] = False
         self._intervals.clear()
         self._clock = None
 
@@ -334,6 +336,7 @@ class StreamingEstimator:
         group.remove(joints)
         if self._scores is not None:
             self._scores.clear(joints)
+            self._overruled[joints] = False
         for j in joints:
             self._group_of[j] = None
         if not group.joints:
@@ -509,13 +512,19 @@ class StreamingEstimator:
         every = np.broadcast_to(available, (len(available), len(joints)))
         levels = len(self._half_widths)
         smallest = (pick % levels == levels - 1) | ~every[after, columns]
+        mine = (fitted, first, second, error, smallest)
+        # The rule's where a joint has no record, or where the chosen candidate's estimate leaves the rule's
+        # interval (the motion changed since the record was made: a move starts after a dwell). Checked at
+        # the estimates kept for scoring (every one up to 200 Hz, every fifth at 1 kHz) and, once a joint's
+        # check failed, at every estimate until it holds again.
+        if self._candidates is None and known.all() and not self._overruled[joints].any():
+            return mine
         rule = adaptive_fit(times, values, target_s, self.settings.window / 2.0, self.settings.degree, 0.0, derivative)
-        # the rule's where a joint has no record, or where the chosen candidate's estimate leaves the rule's
-        # interval (the motion changed since the record was made: a move starts after a dwell)
         ours = np.where(derivative == 2, second, first)
         theirs = np.where(derivative == 2, rule[2], rule[1])
-        known &= np.abs(ours - theirs) <= GAMMA * np.hypot(rule[3], error)
-        mine = (fitted, first, second, error, smallest)
+        agree = np.abs(ours - theirs) <= GAMMA * np.hypot(rule[3], error)
+        self._overruled[joints] = known & ~agree
+        known &= agree
         return tuple(np.where(known, a, b) for a, b in zip(mine, rule, strict=True))
 
     def _score(self, now: int) -> None:
