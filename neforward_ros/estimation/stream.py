@@ -513,6 +513,8 @@ class StreamingEstimator:
         levels = len(self._half_widths)
         smallest = (pick % levels == levels - 1) | ~every[after, columns]
         mine = (fitted, first, second, error, smallest)
+        ours = np.where(derivative == 2, second, first)
+        known &= np.isfinite(ours)  # (a candidate whose normal equations proved singular gives none)
         # The rule's where a joint has no record, or where the chosen candidate's estimate leaves the rule's
         # interval (the motion changed since the record was made: a move starts after a dwell). Checked at
         # the estimates kept for scoring (every one up to 200 Hz, every fifth at 1 kHz) and, once a joint's
@@ -520,7 +522,6 @@ class StreamingEstimator:
         if self._candidates is None and known.all() and not self._overruled[joints].any():
             return mine
         rule = adaptive_fit(times, values, target_s, self.settings.window / 2.0, self.settings.degree, 0.0, derivative)
-        ours = np.where(derivative == 2, second, first)
         theirs = np.where(derivative == 2, rule[2], rule[1])
         agree = np.abs(ours - theirs) <= GAMMA * np.hypot(rule[3], error)
         self._overruled[joints] = known & ~agree
