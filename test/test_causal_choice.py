@@ -191,3 +191,11 @@ def test_a_chosen_candidate_without_an_estimate_hands_it_to_the_rule(monkeypatch
     out = [e for k in range(len(t)) for e in estimator.update(int(stamps[k]), names, q[k].tolist())]
     late = [e for e in out if e.stamp_ns > stamps[0] + 5 * 10**8]  # records made, most estimates not kept
     assert len(late) > 900 and all(e.all_ready and np.isfinite(e.accelerations).all() for e in late)
+
+
+def test_a_singular_system_gives_no_estimate_and_spares_the_others() -> None:
+    matrices = np.stack([2.0 * np.eye(3), np.ones((3, 3)), np.diag([1.0, 4.0, 5.0])])
+    inverses = causal_choice._inverses(matrices)
+    np.testing.assert_allclose(inverses[0], 0.5 * np.eye(3))
+    assert np.isnan(inverses[1]).all()
+    np.testing.assert_allclose(inverses[2], np.diag([1.0, 0.25, 0.2]))

@@ -10,23 +10,28 @@ window and degree chosen knowing the truth (``bench/bench_estimator_family.py``)
 A causal estimate's error can be told afterwards, though. Half a window after a sample, the centred
 fit of the default setting (its window reaching half a window each way, the adaptive rule choosing
 it) estimates q'' there several times more accurately than any one-sided fit: it serves as the
-truth. So every estimate fits a fixed set of candidates: degrees :data:`DEGREES` on each of
-:data:`LEVELS` half-widths (:func:`half_widths`) whose window holds at least degree + :data:`EXTRA` samples,
-and keeps their
-estimates (at most :data:`SCORED_PER_MEMORY` per half window); once an estimate is half a window old,
-each candidate's is scored against the centred fit there. Per joint, each candidate keeps two
-exponentially weighted means of its squared errors (:class:`ErrorScores`): over a short memory, half
-a window, which follows the motion as it changes (a slow sine at a fine encoder's 1 kHz wants the
-longest window away from its turning points, not at them), and over a long one,
-:data:`LONG_MEMORY`, which remembers what the last moves needed through a dwell, where every
-candidate is right. The candidate whose two means sum to the least gives the estimate; its root mean
-square error over the short memory is the stated standard deviation. A joint without scores yet (the
-first half window after a start or a restart) keeps the adaptive rule's choice. The estimates at
-targets not kept for scoring fit only the chosen candidates.
+truth. So every estimate fits a fixed set of candidates, degrees :data:`DEGREES` on each of
+:data:`LEVELS` half-widths (:func:`half_widths`) whose window holds at least degree + :data:`EXTRA`
+samples, and keeps their estimates (at most :data:`SCORED_PER_MEMORY` per half window; the estimates
+between fit only the chosen candidates); once an estimate is half a window old, each candidate's is
+scored against the centred fit there. Per joint, each candidate keeps two exponentially weighted
+means of its squared errors (:class:`ErrorScores`): over a short memory, half a window, which
+follows the motion as it changes (a slow sine at a fine encoder's 1 kHz wants the longest window
+away from its turning points, not at them), and over a long one, :data:`LONG_MEMORY`, which
+remembers what the last moves needed through a dwell, where every candidate is right; each squared
+error is floored at the candidate's variance for the least noise, so that at rest the candidates
+rank by their noise. The candidate whose two means sum to the least gives the estimate; its root
+mean square error over the short memory is the stated standard deviation.
+
+The streaming estimator keeps the adaptive rule's estimate where a joint has no record yet
+(:data:`LEAST_RECORD` scores: about 0.15-0.2 s after a start or a restart), and where the chosen
+candidate's estimate leaves the rule's by more than G of their combined deviations: the motion
+changed since the record was made (a move starts after a dwell, whose record chose a long window).
 
 Over the benchmark's family (``python bench/bench_estimator_family.py``), the causal setting's ratio to
-hindsight went from a median 2.34 (worst 8.81, 85 % of the cases over 1.5) to the figures in the
-estimators guide; its cost per message about doubled.
+hindsight went from a median 2.34 (worst 8.81, 85 % of the cases over 1.5) to 0.99 (worst 1.95, 4 %
+over); per message it costs 1.4x the rule alone at 1 kHz and 3x at 100 Hz, where every estimate is
+scored (the estimators guide has the figures and how they were measured).
 """
 
 from __future__ import annotations
@@ -45,10 +50,10 @@ RATIO = 2.0**0.25
 with a level between each two: at 100 Hz its windows hold 21, 15, 11, 8 and 6 samples, and a 5 Hz
 motion's best, 7 samples of degree 5, falls between)."""
 LEVELS = 20
+"""Half-widths of the candidates, the largest half the estimator's window."""
 EXTRA = 1
 """Samples a candidate's window holds at least, beyond its degree: 1, the interpolating polynomial
 (at a fine encoder's 100 Hz, a 5 Hz motion's best is degree 5 through 6 or 7 samples)."""
-"""Half-widths of the candidates, the largest half the estimator's window."""
 SCORED_PER_MEMORY = 20
 """Estimates scored per memory time constant at most (an estimate is kept for scoring only once that
 share of the memory has passed since the last one kept: at 1 kHz about every fifth, at 100 Hz each)."""
@@ -142,7 +147,7 @@ def python_candidates(
     """:func:`candidates` in numpy: one batch of normal equations for every candidate fitted."""
     lo = times.searchsorted(target - 2.0 * half_widths, side="left")
     level, used, square, hankel, scale = _layout(tuple(half_widths))
-    fitted = (len(times) - lo)[level] >= np.repeat(np.array(DEGREES), len(half_widths)) + EXTRA  # (C,): usable
+    fitted = usable(times, target, half_widths)
     if only is not None:
         wanted = np.zeros(len(level), dtype=bool)
         wanted[only] = True
@@ -166,7 +171,7 @@ def python_candidates(
     # One batch of (top + 1)-square systems, candidate by candidate (degree by degree, then level): a lower
     # degree's Gram matrix padded with the identity, its moments with zeros, gives the same coefficients.
     gram = np.where(square[rows], sums[hankel][:, :, at].transpose(2, 0, 1), _EYE)
-    inverse = np.linalg.inv(gram)[:, :3]  # value, first and second derivative's rows (every degree >= 2)
+    inverse = _inverses(gram)[:, :3]  # value, first and second derivative's rows (every degree >= 2)
     coefficients = np.einsum("cij,cjn->cin", inverse, moments[at] * used[rows])  # (C', 3, n)
     h = scale[rows]
     first, second = inverse[:, 1, 1, None] / (h * h), 4.0 * inverse[:, 2, 2, None] / (h * h) ** 2
@@ -176,6 +181,21 @@ def python_candidates(
     out[3] = np.where(derivative == 2, out[2], out[1])
     out[4, rows] = np.where(derivative == 2, second, first)
     return out[0], out[1], out[2], out[3], out[4]
+
+
+def _inverses(matrices: np.ndarray) -> np.ndarray:
+    """The inverses of a batch of matrices (B, d, d); NaN for one singular to rounding (its candidate
+    gives no estimate, as the C function's Cholesky says)."""
+    try:
+        return np.linalg.inv(matrices)
+    except np.linalg.LinAlgError:
+        out = np.full(matrices.shape, np.nan)
+        for k, matrix in enumerate(matrices):
+            try:
+                out[k] = np.linalg.inv(matrix)
+            except np.linalg.LinAlgError:
+                pass
+        return out
 
 
 class ErrorScores:
