@@ -134,9 +134,10 @@ def test_a_joint_at_rest_ranks_the_candidates_by_their_noise(monkeypatch) -> Non
     assert chosen[0] == 1 and error[0] == pytest.approx(1e-7)
 
 
-def causal_ratio(kind: str, rate: float, bits: int, seed: int) -> float:
-    """The causal polyfit's q'' relative RMS error over hindsight's for zero delay (1 s to the last 0.5 s)."""
-    t, q, _, qdd = make(kind, rate, bits, seed, seconds=3.0)
+def causal_ratio(kind: str, rate: float, bits: int, seed: int, seconds: float = 3.0) -> float:
+    """The causal polyfit's q'' relative RMS error over hindsight's for zero delay (1 s to the last 0.5 s,
+    every sample)."""
+    t, q, _, qdd = make(kind, rate, bits, seed, seconds=seconds)
     names = [f"j{k}" for k in range(q.shape[1])]
     estimator = StreamingEstimator(names, settings=StreamSettings(mode="causal"), log=lambda level, message: None)
     stamps = EPOCH_NS + np.round(t * 1e9).astype(np.int64)
@@ -145,17 +146,26 @@ def causal_ratio(kind: str, rate: float, bits: int, seed: int) -> float:
         for estimate in estimator.update(int(stamps[k]), names, q[k].tolist()):
             found[estimate.stamp_ns] = estimate.accelerations
     inside = np.flatnonzero((t > 1.0) & (t < t[-1] - 0.5))
-    evaluated = inside[:: max(1, len(inside) // 300)]
+    evaluated = inside
     got = np.array([found[int(stamps[k])] for k in evaluated])
     return relative_rms(got, qdd[evaluated]) / best(t, q, qdd, evaluated, 0.0)[0]
 
 
-CASES = [("sines3", 400.0, 16, 7), ("gait", 800.0, 18, 8), ("sines0.5", 250.0, 14, 9), ("minjerk", 600.0, 16, 10)]
+CASES = [
+    ("sines3", 400.0, 16, 7),
+    ("gait", 800.0, 18, 8),
+    ("sines0.5", 250.0, 14, 9),
+    ("minjerk", 600.0, 16, 10),
+    # a coarse encoder at 1 kHz: the rule's estimate jumps by tens of rad/s^2 at a turning point, with a
+    # deviation that falls short of it; checked against that one deviation instead of its recent root mean
+    # square, the rule overruled the right choice there (5.3x hindsight)
+    ("sines0.5", 1000.0, 12, 300, 4.0),
+]
 
 
-@pytest.mark.parametrize("kind, rate, bits, seed", CASES)
-def test_the_causal_fit_is_within_1_5x_of_hindsight(kind: str, rate: float, bits: int, seed: int) -> None:
-    ratio = causal_ratio(kind, rate, bits, seed)
+@pytest.mark.parametrize("case", CASES, ids=[f"{c[0]}-{c[1]:g}Hz-{c[2]}bits" for c in CASES])
+def test_the_causal_fit_is_within_1_5x_of_hindsight(case: tuple) -> None:
+    ratio = causal_ratio(*case)
     assert ratio <= 1.5, ratio
 
 
@@ -168,7 +178,7 @@ def test_the_adaptive_rule_alone_fails_the_same_check(monkeypatch) -> None:
 
     monkeypatch.setattr(causal_choice.ErrorScores, "choose", no_record)
     ratios = [causal_ratio(*case) for case in CASES]
-    assert sum(ratio > 1.5 for ratio in ratios) >= 3, ratios
+    assert sum(ratio > 1.5 for ratio in ratios) >= 4, ratios
 
 
 def test_a_chosen_candidate_without_an_estimate_hands_it_to_the_rule(monkeypatch) -> None:

@@ -114,6 +114,10 @@ class StreamingEstimator:
         # where kept for scoring (else None)
         self._candidates: np.ndarray | None = None
         self._overruled = np.zeros(len(self.joint_names), dtype=bool)  # the rule's estimate taken at the last check
+        # the rule's squared deviations at the checks, exponentially weighted over half a window: sum, weight,
+        # and when last added to (s; NaN: never)
+        self._rule_spread = np.zeros((2, len(self.joint_names)))
+        self._rule_checked = np.full(len(self.joint_names), np.nan)
         chosen = self.settings.method == "polyfit" and self.settings.adaptive and self.settings.order is None
         if chosen and self._lag_ns == 0:  # (an explicit order: that degree alone, the adaptive rule's windows)
             half = self.settings.window / 2.0
@@ -189,6 +193,8 @@ class StreamingEstimator:
         if self._scores is not None:
             self._scores.clear()
             self._overruled[:] = False
+            self._rule_spread[:] = 0.0
+            self._rule_checked[:] = np.nan
         self._intervals.clear()
         self._clock = None
 
@@ -337,6 +343,8 @@ class StreamingEstimator:
         if self._scores is not None:
             self._scores.clear(joints)
             self._overruled[joints] = False
+            self._rule_spread[:, joints] = 0.0
+            self._rule_checked[joints] = np.nan
         for j in joints:
             self._group_of[j] = None
         if not group.joints:
@@ -523,7 +531,14 @@ class StreamingEstimator:
             return mine
         rule = adaptive_fit(times, values, target_s, self.settings.window / 2.0, self.settings.degree, 0.0, derivative)
         theirs = np.where(derivative == 2, rule[2], rule[1])
-        agree = np.abs(ours - theirs) <= GAMMA * np.hypot(rule[3], error)
+        # the rule's deviation, or where larger its root mean square over the last half window's checks (one
+        # estimate's falls short of the rule's errors on a coarse encoder, where they come and go)
+        since = target_s - self._rule_checked[joints]
+        decay = np.where(np.isfinite(since), np.exp(-since / (0.5 * self.settings.window)), 0.0)
+        self._rule_spread[:, joints] = decay * self._rule_spread[:, joints] + [rule[3] ** 2, np.ones(len(joints))]
+        self._rule_checked[joints] = target_s
+        spread = np.fmax(rule[3], np.sqrt(self._rule_spread[0, joints] / self._rule_spread[1, joints]))
+        agree = np.abs(ours - theirs) <= GAMMA * np.hypot(spread, error)
         self._overruled[joints] = known & ~agree
         known &= agree
         return tuple(np.where(known, a, b) for a, b in zip(mine, rule, strict=True))
