@@ -435,16 +435,11 @@ class StreamingEstimator:
         """polyfit or difference over the support's samples (covered): position, velocity,
         acceleration, and the acceleration's standard deviation (NaN where not known)."""
         settings = self.settings
-        stamps = group.stamps
         lead_ns = self._lag_ns
-        lo = int(stamps.searchsorted(target + lead_ns - self._window_ns, side="left"))
-        hi = int(stamps.searchsorted(target + lead_ns, side="right"))
-        positions, velocities = group.positions[lo:hi], group.velocities[lo:hi]
-        by_velocity = np.zeros(len(group.joints), dtype=bool)
-        if group.velocities_everywhere_after(lo):
-            by_velocity = np.isfinite(velocities).all(axis=0)
+        times, positions, velocities, by_velocity = self._samples(
+            group, target + lead_ns - self._window_ns, target + lead_ns
+        )
         fitted_velocities = bool(by_velocity.any())
-        times = group.seconds[lo:hi]
         target_s = (target - self._origin) / NS
         if fitted_velocities and exact:
             # One column per joint: its velocities where it has them all, else its positions.
@@ -560,19 +555,26 @@ class StreamingEstimator:
             return np.full(len(group.joints), np.nan)
         half = self.settings.window / 2.0
         half_ns = round(half * NS)
-        lo = int(stamps.searchsorted(stamp - half_ns, side="left"))
-        hi = int(stamps.searchsorted(stamp + half_ns, side="right"))
+        times, positions, velocities, by_velocity = self._samples(group, stamp - half_ns, stamp + half_ns)
+        values = np.where(by_velocity, velocities, positions)
+        derivative = np.where(by_velocity, 1, 2)
+        order, lower = degrees(None, True, False)
+        _, d1, d2, _, _ = adaptive_fit(times, values, (stamp - self._origin) / NS, half, order, half, derivative, lower)
+        return np.where(by_velocity, d1, d2)
+
+    @staticmethod
+    def _samples(group: JointHistory, first_ns: int, last_ns: int) -> tuple[np.ndarray, ...]:
+        """The group's samples stamped in [first_ns, last_ns]: times (s from the segment's origin),
+        positions and velocities, and which joints are fitted on their velocities (those with a
+        velocity in every sample there, when every sample since has them)."""
+        stamps = group.stamps
+        lo = int(stamps.searchsorted(first_ns, side="left"))
+        hi = int(stamps.searchsorted(last_ns, side="right"))
         positions, velocities = group.positions[lo:hi], group.velocities[lo:hi]
         by_velocity = np.zeros(len(group.joints), dtype=bool)
         if group.velocities_everywhere_after(lo):
             by_velocity = np.isfinite(velocities).all(axis=0)
-        values = np.where(by_velocity, velocities, positions)
-        derivative = np.where(by_velocity, 1, 2)
-        order, lower = degrees(None, True, False)
-        _, d1, d2, _, _ = adaptive_fit(
-            group.seconds[lo:hi], values, (stamp - self._origin) / NS, half, order, half, derivative, lower
-        )
-        return np.where(by_velocity, d1, d2)
+        return group.seconds[lo:hi], positions, velocities, by_velocity
 
     # -- consistency --------------------------------------------------------------------------
 
