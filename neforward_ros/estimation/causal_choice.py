@@ -94,6 +94,15 @@ def usable(times: np.ndarray, target: float, half_widths: np.ndarray) -> np.ndar
     return (len(times) - lo)[_layout(tuple(half_widths))[0]] >= np.repeat(np.array(DEGREES), len(half_widths)) + EXTRA
 
 
+def _wanted(only: np.ndarray | None, count: int) -> np.ndarray | None:
+    """The candidates of the indices ``only`` as a mask (count,), or None for every one."""
+    if only is None:
+        return None
+    wanted = np.zeros(count, dtype=bool)
+    wanted[only] = True
+    return wanted
+
+
 def candidates(
     times: np.ndarray,
     values: np.ndarray,
@@ -124,10 +133,7 @@ def candidates(
     """
     library = native_fit.FIT.get()
     if library is not None:
-        wanted = None
-        if only is not None:
-            wanted = np.zeros(len(DEGREES) * len(half_widths), dtype=bool)
-            wanted[only] = True
+        wanted = _wanted(only, len(DEGREES) * len(half_widths))
         got = native_fit.causal_candidates(library, times, values, target, half_widths, DEGREES, EXTRA, derivative,
                                            wanted)  # fmt: skip
         if got is not None:
@@ -149,9 +155,7 @@ def python_candidates(
     level, used, square, hankel, scale = _layout(tuple(half_widths))
     fitted = usable(times, target, half_widths)
     if only is not None:
-        wanted = np.zeros(len(level), dtype=bool)
-        wanted[only] = True
-        fitted &= wanted
+        fitted &= _wanted(only, len(level))
     rows = np.flatnonzero(fitted)
     out = np.full((5, len(level), values.shape[1]), np.nan)
     if not len(rows):

@@ -190,11 +190,7 @@ class StreamingEstimator:
         self._pending.clear()
         if self._pool is not None:
             self._pool.clear()
-        if self._scores is not None:
-            self._scores.clear()
-            self._overruled[:] = False
-            self._rule_spread[:] = 0.0
-            self._rule_checked[:] = np.nan
+        self._forget_scores(None)
         self._intervals.clear()
         self._clock = None
 
@@ -338,13 +334,19 @@ class StreamingEstimator:
             return _REPEATS
         return bool(by_group or fresh)
 
+    def _forget_scores(self, joints: list[int] | None) -> None:
+        """The causal candidates' scores and the rule's checks of these joints (all: None), forgotten."""
+        if self._scores is None:
+            return
+        self._scores.clear(joints)
+        columns = slice(None) if joints is None else joints
+        self._overruled[columns] = False
+        self._rule_spread[:, columns] = 0.0
+        self._rule_checked[columns] = np.nan
+
     def _forget(self, group: JointHistory, joints: list[int]) -> None:
         group.remove(joints)
-        if self._scores is not None:
-            self._scores.clear(joints)
-            self._overruled[joints] = False
-            self._rule_spread[:, joints] = 0.0
-            self._rule_checked[joints] = np.nan
+        self._forget_scores(joints)
         for j in joints:
             self._group_of[j] = None
         if not group.joints:
