@@ -223,7 +223,7 @@ static int fit_target(long count, const double *times, const double *values, lon
     double *scratch = malloc(sizeof(double) * (n + d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n
                                                + (size_t)rings * n + 2 * (size_t)n + (size_t)width));
     if (scratch == NULL) return 2;
-    double *equal = scratch, *moments = equal + n, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
+    double *moments = scratch + n, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
     double *out_low = fits_low + 5 * (size_t)valid_low * n;
     double *white = out_low + 5 * (size_t)n, *step = white + n, *spread = step + n;
     double *changes = spread + 4 * n;  /* after previous, candidate, alive: (rings, n) */
@@ -246,20 +246,25 @@ static int fit_target(long count, const double *times, const double *values, lon
     for (long j = 0; j < n; j++) { spread[j] = sqrt(spread[j] * (1.0 / width)); white[j] = 0.0; }
     if (width >= 8) {
         const double *wt = times + lo[0];
-        for (long j = 0; j < n; j++) equal[j] = 0.0;  /* whether column j holds equal neighbours */
-        for (long i = 0; i + 1 < width; i++)
+        for (long i = 0; i + 1 < width; i++)  /* the smallest change: an encoder's step, if on its grid */
             for (long j = 0; j < n; j++) {
                 double a = fabs(window[(i + 1) * n + j] - window[i * n + j]);
-                if (a == 0.0) equal[j] = 1.0;
-                else if (a < step[j]) step[j] = a;
+                if (a > 0.0 && a < step[j]) step[j] = a;
             }
-        for (long j = 0; j < n; j++) if (equal[j] == 0.0) step[j] = INFINITY;  /* moves every sample: white */
-        for (long i = 0; i + 1 < width; i++)  /* an encoder's grid: every difference a whole number of steps */
-            for (long j = 0; j < n; j++)
-                if (isfinite(step[j])) {
-                    double ratio = (window[(i + 1) * n + j] - window[i * n + j]) * (1.0 / step[j]);
-                    if (fabs(ratio - nearbyint(ratio)) > lattice) step[j] = INFINITY;
-                }
+        for (long j = 0; j < n; j++) {  /* an encoder's grid: each sample a whole number of steps from
+                                            the first, and the changes not all one number of steps */
+            if (!isfinite(step[j])) continue;
+            double position = 0.0, first = 0.0;
+            int varied = 0;
+            for (long i = 0; i + 1 < width; i++) {
+                double ratio = (window[(i + 1) * n + j] - window[i * n + j]) * (1.0 / step[j]);
+                position += ratio;
+                if (fabs(position - nearbyint(position)) > lattice) { step[j] = INFINITY; break; }
+                if (i == 0) first = nearbyint(ratio);
+                else if (nearbyint(ratio) != first) varied = 1;
+            }
+            if (!varied) step[j] = INFINITY;
+        }
         /* noise from the normalised sixth divided differences of samples 1, 2, 4, 8 ... apart (see
            sixth_differences and noise_of): stride 1 is the white noise; a coloured stride counts
            while they grow at most `growth` times per doubling, once the next one agrees */
