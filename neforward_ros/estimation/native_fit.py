@@ -578,11 +578,11 @@ def fits(
     # Each target is fitted on its own (the C function keeps nothing from one to the next), and a
     # ctypes call releases the GIL: a whole recording's targets are shared among the cores.
     workers = min(os.cpu_count() or 1, 8) if len(targets) >= PARALLEL_TARGETS else 1
-    bounds = np.linspace(0, len(targets), workers + 1).astype(int)
-    parts = [slice(int(a), int(b)) for a, b in itertools.pairwise(bounds.tolist())]
-    if workers == 1:
-        run(parts[0])
+    if workers == 1:  # the node's one target: no parts to share out
+        run(slice(0, len(targets)))
     else:
+        bounds = np.linspace(0, len(targets), workers + 1).astype(int)
+        parts = [slice(int(a), int(b)) for a, b in itertools.pairwise(bounds.tolist())]
         threads = [threading.Thread(target=run, args=(part,), name="neforward-fit") for part in parts[1:]]
         for thread in threads:
             thread.start()
