@@ -17,13 +17,14 @@ intersection and a smaller one is kept.
 The noise is read from each joint's own samples in the largest window: white noise from the mean
 absolute sixth difference (the motion's contribution to a sixth difference is small at the rates joints
 are sampled, and where it is not it makes the estimate cautious, not wrong), and an encoder's step from
-the smallest non-zero difference between consecutive samples (sigma = step / sqrt(12)) where every
-difference in the window is a whole number of that step (:data:`LATTICE`): samples on an encoder's grid.
-(It used to be read only where some consecutive samples were equal: a joint moving about a step a
-sample, whose equal readings are left out as a driver's repeats, rounds with errors correlated from
-sample to sample that the differences do not show, and read as a tiny white noise, 29x hindsight on a
-slow sine through 13 bits at 800 Hz. Where a joint moves many steps a sample its rounding is white, and
-the differences read the same.) A fast joint's two samples that happen to round alike at a turning point
+the smallest non-zero difference between consecutive samples (sigma = step / sqrt(12)) where the
+window's samples lie on a grid of that step (:func:`on_grid`: each a whole number of steps from the
+first, within :data:`LATTICE`, and the changes not all the same number of steps). (It used to be read
+only where some consecutive samples were equal: a joint moving about a step a sample, whose equal
+readings are left out as a driver's repeats, rounds with errors correlated from sample to sample that
+the differences do not show, and read as a tiny white noise, 29x hindsight on a slow sine through 13
+bits at 800 Hz. Where a joint moves many steps a sample its rounding is white, and the differences read
+the same.) A fast joint's two samples that happen to round alike at a turning point
 (a 5 Hz sine at 100 Hz) are no encoder step: its smallest other difference is tens of steps, the
 differences are no multiples of it, and taking it as the step would state a noise hundreds of times the
 real one, the largest window's bias hidden under it. The larger of the two is taken. A quantisation
