@@ -220,10 +220,10 @@ static int fit_target(long count, const double *times, const double *values, lon
     if (valid == 0) return 1;
     if (lower == 0) valid_low = 0;
     long width = hi[0] - lo[0], rings = valid > valid_low ? valid : valid_low;
-    double *scratch = malloc(sizeof(double) * (n + d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n
+    double *scratch = malloc(sizeof(double) * (d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n
                                                + (size_t)rings * n + 2 * (size_t)n + (size_t)width));
     if (scratch == NULL) return 2;
-    double *moments = scratch + n, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
+    double *moments = scratch, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
     double *out_low = fits_low + 5 * (size_t)valid_low * n;
     double *white = out_low + 5 * (size_t)n, *step = white + n, *spread = step + n;
     double *changes = spread + 4 * n;  /* after previous, candidate, alive: (rings, n) */
