@@ -19,6 +19,7 @@ honesty of the stated standard deviation (RMS of error / sigma per case: 1 for a
 --plot, the trade-off figure: each setting's delay against its median and worst error.
 
 Usage: python bench/bench_estimator_family.py [--seconds 4] [--plot docs/estimators.png] [--quick]
+       [--only default,kalman 20ms] (those settings alone, by their short names)
 """
 
 from __future__ import annotations
@@ -78,7 +79,17 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=4.0)
     parser.add_argument("--plot", type=Path)
     parser.add_argument("--quick", action="store_true", help="500 Hz and 16 bits only")
+    parser.add_argument("--only", help=f"comma-separated short names among: {', '.join(SHORT)}")
     args = parser.parse_args()
+    if args.only:
+        wanted = args.only.split(",")
+        unknown = sorted(set(wanted) - set(SHORT))
+        if unknown:
+            parser.error(f"unknown settings {unknown}; choose among {SHORT}")
+        for name, short in list(zip(SETTINGS, SHORT, strict=True)):
+            if short not in wanted:
+                del SETTINGS[name]
+                SHORT.remove(short)
     rates, encoders = ((500,), ((16, 0.0),)) if args.quick else (RATES, ENCODERS)
     errors: dict[str, list[float]] = {name: [] for name in SETTINGS}
     ratios: dict[str, list[float]] = {name: [] for name in SETTINGS}

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from neforward_ros.estimation import adaptive as adaptive_module
+from neforward_ros.estimation import degree_choice
 from neforward_ros.estimation.adaptive import GAMMA, DeviationPool, pooled_std
 from neforward_ros.estimation.kalman_bank import KalmanBank
 from neforward_ros.estimation.motion import KalmanSettings
@@ -134,7 +135,8 @@ def coloured_honesty(rate: float, cutoff: float, seed: int, monkeypatch=None) ->
     """RMS of (error / stated sigma) per joint of the default on a 2 Hz chirp whose positions carry
     coloured noise (white noise through a 2nd-order low-pass at ``cutoff``, 2e-4 rad RMS: a real
     arm's logged positions have most of their noise well below the sampling rate's Nyquist
-    frequency), stamps jittered by +-30 %. ``monkeypatch``: the stated sigma left unpooled."""
+    frequency), stamps jittered by +-30 %. ``monkeypatch``: the stated sigma left unpooled (each
+    estimate's own, without the degree choice's mean squared error over the last second either)."""
     from scipy.signal import butter, lfilter
 
     rng = np.random.default_rng(seed)
@@ -144,8 +146,10 @@ def coloured_honesty(rate: float, cutoff: float, seed: int, monkeypatch=None) ->
     noise = lfilter(b, a, rng.normal(0.0, 1.0, (count, 2)), axis=0)
     q = np.stack([chirp(t, 2.0, s)[0] for s in (0.0, 1.0)], axis=1) + 2e-4 * noise / noise.std(axis=0)
     truth = np.stack([chirp(t, 2.0, s)[1] for s in (0.0, 1.0)], axis=1)
-    if monkeypatch is not None:
+    if monkeypatch is not None:  # neither the last half window's deviations nor the last second's scores
         monkeypatch.setattr(DeviationPool, "state", lambda self, stamp, own: own)
+        unscored = degree_choice.chosen_std
+        monkeypatch.setattr(degree_choice, "chosen_std", lambda a, s, c, error: unscored(a, s, c, 0.0 * error))
     index, estimate, std = run(StreamSettings(), EPOCH_NS + np.round(t * 1e9).astype(np.int64), q)
     keep = (t[index] > 1.0) & (t[index] < t[-1] - 0.5)
     return np.sqrt(np.mean(((estimate[keep] - truth[index][keep]) / std[keep]) ** 2, axis=0))

@@ -240,20 +240,22 @@ def _whole(
         for j, _, _, e in members:
             efforts[:, j] = _efforts_at(t_ns, e[fresh], targets)
         t = (t_ns - origin) / NS
+        stale = _gap_to_samples(t, target_s) > settings.estimator.max_gap
+        silent[:, joints] = stale[:, None]
+        unready = stale | ~covered_mask(t, target_s, support, _end_slack(reach), reach) | ~reached
         q_at, qd_at, qdd_at, std_at = estimate_at(
             t,
             q,
             target_s,
             velocity=v if use_velocity else None,
+            stamps_ns=targets,
+            counted=~unready,  # the estimates the node makes
             method=batch.method,
             window=batch.window,
             order=batch.order,
             adaptive=batch.adaptive,
             spread=True,
         )
-        stale = _gap_to_samples(t, target_s) > settings.estimator.max_gap
-        silent[:, joints] = stale[:, None]
-        unready = stale | ~covered_mask(t, target_s, support, _end_slack(reach), reach) | ~reached
         for column, values in enumerate((q_at, qd_at, qdd_at)):
             values[unready] = np.nan
             state[column][:, joints] = values

@@ -54,11 +54,12 @@ the last half window's estimates, where larger than the estimate's own (the Pand
 sigma 1.13-1.59; the family's median 0.80, 76 % of its motions within 0.5-2). The
 windows chosen and the two degrees' fusion stay on the noise alone: the estimates are the same.
 
-The default fit runs the rule twice, with polynomials of degree 6 and of degree 4 (``lower``), and keeps
-the degree-4 choice where the two agree within G of their combined deviations and it is the less noisy,
-the degree-6 one elsewhere: a slow, noisy motion keeps the quieter degree 4 over the largest window,
-and a fast one (a 5 Hz sine, a move's corner) the degree 6, whose bias lets the rule keep windows
-about twice as wide as degree 4's for the same error.
+The default fit runs the rule at degrees 6, 4 and 2 and chooses each joint's degree by the last second's
+estimates (:mod:`.degree_choice`). Two degrees can also be fused (``lower``: the centred fit the causal
+setting is scored against): the degree-4 choice where the two agree within G of their combined
+deviations and it is the less noisy, the degree-6 one elsewhere: a slow, noisy motion keeps the quieter
+degree 4 over the largest window, and a fast one (a 5 Hz sine, a move's corner) the degree 6, whose bias
+lets the rule keep windows about twice as wide as degree 4's for the same error.
 
 The node (one target at a time, :func:`adaptive_fit`) and the bag tool (every target at once,
 :func:`adaptive_fits`) take the same windows, noise and rule: the same estimates.
@@ -283,65 +284,107 @@ def pooled_std(stamps_ns: np.ndarray, std: np.ndarray, window: float) -> np.ndar
     Returns:
         (M, n).
     """
+    squares, counted = _squares(np.asarray(std, dtype=float))
+    total, count = window_sums(stamps_ns, squares, counted, _half_window_ns(window))
+    return _pooled(squares, counted, total, count)
+
+
+def window_sums(
+    stamps_ns: np.ndarray, values: np.ndarray, counted: np.ndarray, span_ns: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's window sums over the rows stamped in (s - span_ns, s]: of ``values`` (M, ...) (0
+    where not counted) and of ``counted`` (M, ...) (1 where counted, 0 elsewhere), as differences of
+    running sums; where a difference would lose the window's sum to rounding (a still joint's tiny
+    values after a fast move's), summed directly, as :class:`RunningWindow` sums every window.
+
+    Args:
+        stamps_ns: (M,), integer ns, increasing.
+        values, counted: (M, ...).
+        span_ns: the window's length, ns.
+
+    Returns:
+        two (M, ...).
+    """
     stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
-    std = np.asarray(std, dtype=float)
-    out = np.empty(std.shape)
-    first = np.searchsorted(stamps_ns, stamps_ns - _half_window_ns(window), side="right")
+    total, count = np.empty(values.shape), np.empty(values.shape)
+    first = np.searchsorted(stamps_ns, stamps_ns - span_ns, side="right")
     for start in range(0, len(stamps_ns), POOL_CHUNK):  # a chunk's rows, and the rows their windows reach
         stop = min(start + POOL_CHUNK, len(stamps_ns))
         reach = int(first[start])
-        squares, counted = _squares(std[reach:stop])
-        padding = np.zeros((1, std.shape[1]))
-        running = np.concatenate([padding, np.cumsum(squares, axis=0)])
-        count = np.concatenate([padding, np.cumsum(counted, axis=0)])
+        part, weight = values[reach:stop], counted[reach:stop]
+        padding = np.zeros((1, *values.shape[1:]))
+        running = np.concatenate([padding, np.cumsum(part, axis=0)])
+        number = np.concatenate([padding, np.cumsum(weight, axis=0)])
         lo, hi = first[start:stop] - reach, np.arange(start, stop) + 1 - reach  # windows [lo, hi)
-        total = running[hi] - running[lo]
+        sums = running[hi] - running[lo]
         # the difference of two running sums keeps the window's sum to about eps * the larger: where that
-        # is not about 1e-12 of it (a still joint's tiny deviations after a fast move's), the window is
-        # summed directly, as the node sums it
-        loose = np.flatnonzero(np.any(running[hi] > PRECISION * total, axis=1))
+        # is not about 1e-12 of it, the window is summed directly
+        loose = np.flatnonzero(np.any((running[hi] > PRECISION * sums).reshape(len(sums), -1), axis=1))
         if len(loose):
             bounds = np.stack([lo[loose], hi[loose]], axis=1).reshape(-1)
-            total[loose] = np.add.reduceat(np.concatenate([squares, padding]), bounds, axis=0)[::2]
-        rows = hi - 1
-        out[start:stop] = _pooled(squares[rows], counted[rows], total, count[hi] - count[lo])
-    return out
+            sums[loose] = np.add.reduceat(np.concatenate([part, padding]), bounds, axis=0)[::2]
+        total[start:stop], count[start:stop] = sums, number[hi] - number[lo]
+    return total, count
 
 
-class DeviationPool:
-    """:func:`pooled_std` one estimate at a time, in stamp order: the node's (each window summed
-    directly; the whole-recording function's differences of running sums agree to about 1e-12)."""
+class RunningWindow:
+    """:func:`window_sums` one row at a time, in stamp order (each window summed directly; the
+    whole-recording function's differences of running sums agree to about 1e-12)."""
 
-    def __init__(self, window: float, joints: int) -> None:
-        self._span_ns = _half_window_ns(window)
+    def __init__(self, span_ns: int, shape: tuple[int, ...]) -> None:
+        self._span_ns = span_ns
         self._stamps = np.zeros(64, dtype=np.int64)
-        self._squares = np.zeros((64, joints))
-        self._counted = np.zeros((64, joints))
+        self._values = np.zeros((64, *shape))
+        self._counted = np.zeros((64, *shape))
         self._first = self._end = 0
 
     def clear(self) -> None:
-        """Forget every estimate (a new stream)."""
+        """Forget every row (a new stream)."""
         self._first = self._end = 0
 
-    def state(self, stamp_ns: int, std: np.ndarray) -> np.ndarray:
-        """The deviations (n,) to state with the estimate at ``stamp_ns`` (after every earlier one)
-        whose own are ``std`` (n,)."""
+    def append(self, stamp_ns: int, values: np.ndarray, counted: np.ndarray) -> None:
+        """A row at ``stamp_ns`` (after every earlier row)."""
         if self._end == len(self._stamps):  # full: the window's rows moved to the front, room doubled
             keep = slice(self._first, self._end)
             size = max(len(self._stamps), 2 * (self._end - self._first))
-            for name in ("_stamps", "_squares", "_counted"):
+            for name in ("_stamps", "_values", "_counted"):
                 old = getattr(self, name)
                 new = np.zeros((size, *old.shape[1:]), dtype=old.dtype)
                 new[: self._end - self._first] = old[keep]
                 setattr(self, name, new)
             self._first, self._end = 0, self._end - self._first
-        squares, counted = _squares(np.asarray(std, dtype=float)[None])
-        self._stamps[self._end], self._squares[self._end], self._counted[self._end] = stamp_ns, squares[0], counted[0]
+        self._stamps[self._end], self._values[self._end], self._counted[self._end] = stamp_ns, values, counted
         self._end += 1
+
+    def sums(self, stamp_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        """The sums of values and counts (shape) over the rows stamped in (stamp_ns - span, stamp_ns]
+        (``stamp_ns`` at least the last row's; the rows before the window are forgotten)."""
         self._first += int(np.searchsorted(self._stamps[self._first : self._end], stamp_ns - self._span_ns, "right"))
         window = slice(self._first, self._end)
-        total, count = np.add.reduce(self._squares[window], axis=0), np.add.reduce(self._counted[window], axis=0)
-        return _pooled(squares, counted, total[None], count[None])[0]
+        return np.add.reduce(self._values[window], axis=0), np.add.reduce(self._counted[window], axis=0)
+
+    def add(self, stamp_ns: int, values: np.ndarray, counted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`append`, then the :meth:`sums` at that row."""
+        self.append(stamp_ns, values, counted)
+        return self.sums(stamp_ns)
+
+
+class DeviationPool:
+    """:func:`pooled_std` one estimate at a time, in stamp order: the node's."""
+
+    def __init__(self, window: float, joints: int) -> None:
+        self._window = RunningWindow(_half_window_ns(window), (joints,))
+
+    def clear(self) -> None:
+        """Forget every estimate (a new stream)."""
+        self._window.clear()
+
+    def state(self, stamp_ns: int, std: np.ndarray) -> np.ndarray:
+        """The deviations (n,) to state with the estimate at ``stamp_ns`` (after every earlier one)
+        whose own are ``std`` (n,)."""
+        squares, counted = _squares(np.asarray(std, dtype=float))
+        total, count = self._window.add(stamp_ns, squares, counted)
+        return _pooled(squares, counted, total, count)
 
 
 def _half_window_ns(window: float) -> int:

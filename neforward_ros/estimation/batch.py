@@ -14,9 +14,11 @@ from typing import Any
 import numpy as np
 
 from neforward_ros.errors import InputError
+from neforward_ros.estimation import degree_choice
 from neforward_ros.estimation.adaptive import adaptive_fits
+from neforward_ros.estimation.coverage import Support, covered_mask
 from neforward_ros.estimation.fit import DEFAULT_WINDOW, check_settings, degrees, local_polynomial
-from neforward_ros.stamps import relative_seconds
+from neforward_ros.stamps import NS, relative_seconds
 
 
 def estimate_derivatives(
@@ -37,8 +39,10 @@ def estimate_derivatives(
         method: ``"polyfit"`` (local polynomial fit, default) or ``"difference"``.
         window: full width in seconds of the local fit (polyfit). A window holding fewer than
             ``order + 1`` samples is widened to the ``order + 1`` nearest samples.
-        order: degree of the local polynomial (polyfit), at least 2; None: 6 fused with 4 for the
-            adaptive fit, 4 for the fixed window (:func:`~neforward_ros.estimation.fit.degrees`).
+        order: degree of the local polynomial (polyfit), at least 2; None: for the adaptive fit, 6,
+            4 or 2 per joint, chosen by the last second's estimates
+            (:mod:`~neforward_ros.estimation.degree_choice`), as the node's default; 4 for the fixed
+            window (:func:`~neforward_ros.estimation.fit.degrees`).
         wrap: per column, True for a continuous joint whose positions wrap at +-pi; those
             columns are unwrapped before differentiating.
         adaptive: polyfit: each column's window chosen per sample, up to ``window``, by the
@@ -82,8 +86,13 @@ def estimate_derivatives(
     if method == "difference":
         qd = np.gradient(positions, seconds, axis=0, edge_order=2)
         qdd = np.gradient(qd, seconds, axis=0, edge_order=2)
+    elif adaptive and lower is not None:  # the estimates the node makes (their windows covered) are pooled
+        support = Support(window / 2.0, window / 2.0, 2 * (lower + 1), window / (lower + 1))
+        stamps_ns = np.round(seconds * NS).astype(np.int64)
+        counted = covered_mask(seconds, seconds, support)[:, None]
+        _, qd, qdd, _ = chosen_degree_fits(seconds, positions, seconds, window / 2.0, stamps_ns, counted)
     elif adaptive:
-        _, qd, qdd, _ = adaptive_fits(seconds, positions, seconds, window / 2.0, order, window / 2.0, lower=lower)
+        _, qd, qdd, _ = adaptive_fits(seconds, positions, seconds, window / 2.0, order, window / 2.0)
     else:
         _, qd, qdd = local_polynomial(seconds, positions, seconds, window / 2.0, order)
     if one_dimensional:
@@ -97,6 +106,8 @@ def estimate_at(
     targets: np.ndarray,
     *,
     velocity: np.ndarray | None = None,
+    stamps_ns: np.ndarray | None = None,
+    counted: np.ndarray | None = None,
     method: str = "polyfit",
     window: float = DEFAULT_WINDOW,
     order: int | None = None,
@@ -115,6 +126,9 @@ def estimate_at(
         targets: times (M,), s.
         velocity: measured velocities (T, m), or None to differentiate positions; when given, the
             acceleration is the derivative of velocity.
+        stamps_ns, counted: the default adaptive fit's degree choice (:func:`chosen_degree_fits`): the
+            targets' stamps (M,), integer ns (None: the targets' seconds in ns), and which targets'
+            estimates the node makes, (M,) or (M, m) (None: every one).
         method, window, order: as for :func:`estimate_derivatives`.
         adaptive: polyfit: each column's window chosen per target, up to ``window``, as the
             streaming estimator's (:mod:`neforward_ros.estimation.adaptive`).
@@ -133,15 +147,20 @@ def estimate_at(
         d2 = np.gradient(d1, t, axis=0, edge_order=2)
         columns = range(q.shape[1])
         q_at, qd_at, qdd_at = (np.stack([np.interp(targets, t, x[:, c]) for c in columns], axis=1) for x in (q, d1, d2))
+    elif adaptive and lower is not None:
+        if stamps_ns is None:
+            stamps_ns = np.round(np.asarray(targets) * NS).astype(np.int64)
+        if counted is None:
+            counted = np.ones((len(targets), 1), dtype=bool)
+        counted = counted if counted.ndim == 2 else counted[:, None]
+        q_at, qd_at, qdd_at, std = chosen_degree_fits(t, q, targets, window / 2.0, stamps_ns, counted, velocity)
     elif adaptive:
         half_width = window / 2.0
         if velocity is None:
-            q_at, qd_at, qdd_at, std = adaptive_fits(t, q, targets, half_width, order, half_width, lower=lower)
+            q_at, qd_at, qdd_at, std = adaptive_fits(t, q, targets, half_width, order, half_width)
         else:  # the window chosen on the velocities, whose derivative is the acceleration
-            q_at, _, _, _ = adaptive_fits(t, q, targets, half_width, order, half_width, lower=lower)
-            qd_at, qdd_at, _, std = adaptive_fits(
-                t, velocity, targets, half_width, order, half_width, derivative=1, lower=lower
-            )
+            q_at, _, _, _ = adaptive_fits(t, q, targets, half_width, order, half_width)
+            qd_at, qdd_at, _, std = adaptive_fits(t, velocity, targets, half_width, order, half_width, derivative=1)
     else:
         half_width = window / 2.0
         q_at, qd_at, qdd_at = local_polynomial(t, q, targets, half_width, order)
@@ -151,3 +170,36 @@ def estimate_at(
     if velocity is not None:
         qd_at[exact] = velocity[index[exact]]
     return (q_at, qd_at, qdd_at, std) if spread else (q_at, qd_at, qdd_at)
+
+
+def chosen_degree_fits(
+    t: np.ndarray,
+    q: np.ndarray,
+    targets: np.ndarray,
+    half_width: float,
+    stamps_ns: np.ndarray,
+    counted: np.ndarray,
+    velocity: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The default adaptive fit at the targets: the rule run at every degree of
+    :data:`~neforward_ros.estimation.degree_choice.DEGREES`, centred (half-width ``half_width``), and
+    each joint's degree chosen per target by its estimates of the last second
+    (:func:`~neforward_ros.estimation.degree_choice.choose`), the estimates at ``stamps_ns`` (M,)
+    where ``counted`` (M, m or 1) pooled. Position, velocity, acceleration and its stated standard
+    deviation (M, m); with ``velocity`` (T, m), the acceleration is the velocities' derivative and
+    their fit's degree is the position's too."""
+    fits = []
+    for degree in degree_choice.DEGREES:
+        if velocity is None:
+            fits.append(adaptive_fits(t, q, targets, half_width, degree, half_width))
+        else:
+            position = adaptive_fits(t, q, targets, half_width, degree, half_width)[0]
+            value, first, _, stated = adaptive_fits(t, velocity, targets, half_width, degree, half_width, derivative=1)
+            fits.append((position, value, first, stated))
+    options = [np.stack(entries) for entries in zip(*fits, strict=True)]
+    pooled = np.broadcast_to(counted, options[2].shape[1:])
+    chosen, error = degree_choice.choose(
+        stamps_ns, np.where(pooled, options[2], np.nan), np.where(pooled, options[3], np.nan)
+    )
+    q_at, qd_at, qdd_at = (degree_choice.pick(entries, chosen) for entries in options[:3])
+    return q_at, qd_at, qdd_at, degree_choice.chosen_std(options[2], options[3], chosen, error)

@@ -22,7 +22,7 @@ from functools import partial
 import numpy as np
 
 from neforward_ros.errors import InputError
-from neforward_ros.estimation import native_fit
+from neforward_ros.estimation import degree_choice, native_fit
 from neforward_ros.estimation.adaptive import FLOOR, GAMMA, DeviationPool, adaptive_fit
 from neforward_ros.estimation.causal_choice import DEGREES, ErrorScores, candidates, half_widths, usable
 from neforward_ros.estimation.coverage import uncovered
@@ -108,6 +108,11 @@ class StreamingEstimator:
         self._pool = None
         if self.settings.method == "polyfit" and self.settings.adaptive:
             self._pool = DeviationPool(self.settings.window, len(self.joint_names))
+        # the default (adaptive, fixed lag, no explicit order): each joint's degree chosen by the last
+        # second's estimates (.degree_choice)
+        self._degrees: degree_choice.DegreePool | None = None
+        if self._pool is not None and self.settings.lower_degree is not None:
+            self._degrees = degree_choice.DegreePool(len(self.joint_names))
         # polyfit's causal adaptive fits: the candidate chosen by its errors half a window ago (.causal_choice)
         self._scores: ErrorScores | None = None
         # every candidate's estimates at the target being estimated and their floors (see ErrorScores.score),
@@ -190,6 +195,8 @@ class StreamingEstimator:
         self._pending.clear()
         if self._pool is not None:
             self._pool.clear()
+        if self._degrees is not None:
+            self._degrees.clear()
         self._forget_scores(None)
         self._intervals.clear()
         self._clock = None
@@ -371,6 +378,8 @@ class StreamingEstimator:
         n = len(self.joint_names)
         state = np.full((n, 5), np.nan)  # position, velocity, acceleration, effort, acceleration's std
         ages = np.full(n, np.inf)
+        if self._degrees is not None:
+            self._degrees.start(target)
         if self._scores is not None:
             self._score(target)
             keeping = self._scores.wants(target)
@@ -451,43 +460,35 @@ class StreamingEstimator:
         else:
             values = positions
         m = len(group.joints)
-        spread = np.full(values.shape[1], np.nan)
+        unknown = np.full(values.shape[1], np.nan)
         if settings.method == "difference":
             fitted, d1, d2 = local_difference(times, values, target_s, lead_ns / NS)
-        elif settings.adaptive:
-            derivative = np.full(values.shape[1], 2)
-            if fitted_velocities and exact:
-                derivative = np.where(by_velocity, 1, 2)
-            elif fitted_velocities:
-                derivative[m:] = 1
-            if self._scores is not None and values.shape[1] == m:  # a column per joint: scored per joint
-                fitted, d1, d2, spread, smallest = self._chosen_fit(group, times, values, target_s, derivative)
-            else:
-                fitted, d1, d2, spread, smallest = adaptive_fit(
-                    times,
-                    values,
-                    target_s,
-                    settings.window / 2.0,
-                    settings.degree,
-                    lead_ns / NS,
-                    derivative,
-                    settings.lower_degree,
-                )
-            joint_smallest = smallest[:m].copy()
-            if fitted_velocities and not exact:  # the acceleration of those joints: their velocities' fit's
-                joint_smallest[by_velocity] = smallest[m:]
-            self._watch_windows(group, joint_smallest)
-        else:
+            return _per_joint((fitted, d1, d2, unknown), m, by_velocity, exact)
+        if not settings.adaptive:
             fitted, d1, d2 = fit_window(times, values, target_s, settings.window / 2.0, settings.degree)
+            return _per_joint((fitted, d1, d2, unknown), m, by_velocity, exact)
+        derivative = np.full(values.shape[1], 2)
         if fitted_velocities and exact:
-            return fitted, np.where(by_velocity, fitted, d1), np.where(by_velocity, d1, d2), spread
-        velocity, acceleration = d1[:m], d2[:m]
-        spread_m = spread[:m].copy()
-        if fitted_velocities:
-            velocity, acceleration = velocity.copy(), acceleration.copy()
-            velocity[by_velocity], acceleration[by_velocity] = fitted[m:], d1[m:]
-            spread_m[by_velocity] = spread[m:]
-        return fitted[:m], velocity, acceleration, spread_m
+            derivative = np.where(by_velocity, 1, 2)
+        elif fitted_velocities:
+            derivative[m:] = 1
+        half, lead = settings.window / 2.0, lead_ns / NS
+        if self._scores is not None and values.shape[1] == m:  # a column per joint: scored per joint
+            got = _per_joint(self._chosen_fit(group, times, values, target_s, derivative), m, by_velocity, exact)
+        elif self._degrees is not None:  # each degree's rule; the degree chosen per joint by the recent estimates
+            fits = [
+                _per_joint(adaptive_fit(times, values, target_s, half, degree, lead, derivative), m, by_velocity, exact)
+                for degree in degree_choice.DEGREES
+            ]
+            options = [np.stack(entries) for entries in zip(*fits, strict=True)]
+            chosen, error = self._degrees.choose(np.asarray(group.joints), options[2], options[3])
+            got = tuple(degree_choice.pick(entries, chosen) for entries in options)
+            got = (*got[:3], degree_choice.chosen_std(options[2], options[3], chosen, error), got[4])
+        else:
+            fit = adaptive_fit(times, values, target_s, half, settings.degree, lead, derivative, settings.lower_degree)
+            got = _per_joint(fit, m, by_velocity, exact)
+        self._watch_windows(group, got[4])
+        return got[0], got[1], got[2], got[3]
 
     def _chosen_fit(
         self, group: JointHistory, times: np.ndarray, values: np.ndarray, target_s: float, derivative: np.ndarray
@@ -686,3 +687,21 @@ class StreamingEstimator:
             f"{where}, at least {support.min_samples} of them, none more than {support.max_hole:g} s apart "
             "(after a start, a restart, a gap or a model reload)",
         )
+
+
+def _per_joint(fit: tuple[np.ndarray, ...], m: int, by_velocity: np.ndarray, exact: bool) -> tuple[np.ndarray, ...]:
+    """A fit's columns (value, first and second derivative, the acceleration's standard deviation, and
+    any more, such as whether it strained) as the group's m joints' position, velocity, acceleration
+    and the rest. The columns are one per joint (its velocities where ``exact`` and it is fitted on
+    them, else its positions), then, where not ``exact``, one per joint fitted on its velocities
+    (``by_velocity``)."""
+    value, first, second, *rest = fit
+    if exact and by_velocity.any():
+        return (value, np.where(by_velocity, value, first), np.where(by_velocity, first, second), *rest)
+    position, velocity, acceleration = value[:m], first[:m].copy(), second[:m].copy()
+    own = [entry[:m].copy() for entry in rest]
+    if by_velocity.any():
+        velocity[by_velocity], acceleration[by_velocity] = value[m:], first[m:]
+        for entry, whole in zip(own, rest, strict=True):
+            entry[by_velocity] = whole[m:]
+    return (position, velocity, acceleration, *own)
