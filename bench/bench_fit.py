@@ -1,6 +1,7 @@
-"""The whole-recording adaptive fit's cost per target, in one run: one degree (4) against the default's
-two degrees fused (6 and 4, one C call). The batch takes each block of targets' sixth differences
-from one pass (see neforward_ros/estimation/native_fit.py).
+"""The whole-recording adaptive fit's cost per target, in one run: one degree (4), two degrees fused
+(6 and 4, the default before 2026-11-25) and the default's three degrees each with its windows chosen
+(6, 4 and 2, among which estimation/degree_choice.py chooses), each one C call. The batch takes each
+block of targets' sixth differences from one pass (see neforward_ros/estimation/native_fit.py).
 
 A synthetic recording: 8 joints at 500 Hz with ±2 % stamp jitter, sines with 1e-5 rad noise rounded
 to 1e-5 rad.
@@ -30,17 +31,24 @@ def main() -> None:
     count, n = args.targets, 8
     t = (np.arange(count) + rng.uniform(-0.02, 0.02, count)) / 500.0
     y = np.sin(t[:, None] * rng.uniform(0.5, 5.0, n)) + np.round(rng.normal(0.0, 1e-5, (count, n)) / 1e-5) * 1e-5
-    times: dict[str, list[float]] = {"degree 4": [], "degrees 6 and 4 fused": []}
+    runs = {
+        "degree 4": lambda: adaptive.adaptive_fits(t, y, t, 0.1, 4, 0.1),
+        "degrees 6 and 4 fused": lambda: adaptive.adaptive_fits(t, y, t, 0.1, 6, 0.1, lower=4),
+        "degrees 6, 4, 2 (default)": lambda: adaptive.degree_fits(t, y, t, 0.1, (6, 4, 2), 0.1),
+    }
+    times: dict[str, list[float]] = {name: [] for name in runs}
     for _ in range(args.repeats):
-        for lower, name in ((None, "degree 4"), (4, "degrees 6 and 4 fused")):
+        for name, run in runs.items():
             start = time.perf_counter()
-            adaptive.adaptive_fits(t, y, t, 0.1, 6 if lower else 4, 0.1, lower=lower)
+            run()
             times[name].append((time.perf_counter() - start) / count)
     median = {name: statistics.median(values) * 1e6 for name, values in times.items()}
     print(f"{count} targets, {n} joints, 500 Hz; median of {args.repeats} runs, µs a target (all cores)")
     for name, value in median.items():
         print(f"  {name:<30} {value:7.2f}")
     print(f"fused over degree 4: {median['degrees 6 and 4 fused'] / median['degree 4']:.2f}x")
+    three = median["degrees 6, 4, 2 (default)"] / median["degrees 6 and 4 fused"]
+    print(f"the default's three over the two fused: {three:.2f}x")
 
 
 if __name__ == "__main__":

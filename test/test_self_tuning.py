@@ -15,6 +15,7 @@ with 14-bit encoders or Gaussian noise.
 from __future__ import annotations
 
 import logging
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -150,6 +151,9 @@ def coloured_honesty(rate: float, cutoff: float, seed: int, monkeypatch=None) ->
         monkeypatch.setattr(DeviationPool, "state", lambda self, stamp, own: own)
         unscored = degree_choice.chosen_std
         monkeypatch.setattr(degree_choice, "chosen_std", lambda a, s, c, error: unscored(a, s, c, 0.0 * error))
+        # the node's choice in numpy, where chosen_std states the deviation (its C states it itself)
+        uncompiled = SimpleNamespace(FIT=SimpleNamespace(get=lambda wait=False: None))
+        monkeypatch.setattr(degree_choice, "native_fit", uncompiled)
     index, estimate, std = run(StreamSettings(), EPOCH_NS + np.round(t * 1e9).astype(np.int64), q)
     keep = (t[index] > 1.0) & (t[index] < t[-1] - 0.5)
     return np.sqrt(np.mean(((estimate[keep] - truth[index][keep]) / std[keep]) ** 2, axis=0))

@@ -492,21 +492,44 @@ def adaptive_fits(
         lead: the largest reach past the target, s (h_max for a centred fit, 0 for a causal one).
         lower: a second, lower degree whose choice is :func:`fused` with ``order``'s; None: ``order`` alone.
     """
+    value, first, second, std = degree_fits(t, y, targets, h_max, (order,), lead, derivative, lower)
+    return (np.ascontiguousarray(value[0]), np.ascontiguousarray(first[0]), np.ascontiguousarray(second[0]),
+            np.ascontiguousarray(std[0]))  # fmt: skip
+
+
+def degree_fits(
+    t: np.ndarray,
+    y: np.ndarray,
+    targets: np.ndarray,
+    h_max: float,
+    degrees: tuple[int, ...],
+    lead: float,
+    derivative: int = 2,
+    lower: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`adaptive_fits` at each degree of ``degrees`` (the first the highest; ``lower`` fused with
+    it alone), each with its own windows chosen, in one C call: the power sums and the noise reading
+    shared, the numbers those of one call per degree to rounding. Four (D, M, n)."""
     library = native_fit.FIT.get(wait=len(targets) >= native_fit.WORTH_WAITING)
     columns = np.full(y.shape[1], derivative)
-    got = None if library is None else native_fit.fits(library, t, y, targets, *_ladder_and_leads(h_max, lead), order,
-                                                       columns, GAMMA, ROUGHNESS, _GAIN, FLOOR, GROWTH,
-                                                       LATTICE, lower)  # fmt: skip
+    got = None if library is None else native_fit.fits(library, t, y, targets, *_ladder_and_leads(h_max, lead),
+                                                       degrees[0], columns, GAMMA, ROUGHNESS, _GAIN, FLOOR, GROWTH,
+                                                       LATTICE, lower, tuple(degrees[1:]))  # fmt: skip
+    fused_with = [lower] + [None] * (len(degrees) - 1)
     if got is None:
-        return python_adaptive_fits(t, y, targets, h_max, order, lead, derivative, lower)
+        fits = [python_adaptive_fits(t, y, targets, h_max, degree, lead, derivative, fused)
+                for degree, fused in zip(degrees, fused_with, strict=True)]  # fmt: skip
+        value, first, second, std = (np.stack(entries) for entries in zip(*fits, strict=True))
+        return value, first, second, std
     out, done = got
-    estimates = [np.ascontiguousarray(out[:, k]) for k in range(4)]
-    if not done.all():  # too few samples in a target's largest window: numpy's fits serve there
-        rest = np.flatnonzero(~done)
-        numpy_fits = python_adaptive_fits(t, y, targets[rest], h_max, order, lead, derivative, lower)
-        for whole, part in zip(estimates, numpy_fits, strict=True):
-            whole[rest] = part
-    return estimates[0], estimates[1], estimates[2], estimates[3]
+    value, first, second, std = (out[:, :, q].transpose(1, 0, 2) for q in range(4))  # views
+    rest = np.flatnonzero(~done)  # too few samples in a target's largest window: numpy's fits serve there
+    for k, (degree, fused) in enumerate(zip(degrees, fused_with, strict=True)):
+        if len(rest):
+            numpy_fits = python_adaptive_fits(t, y, targets[rest], h_max, degree, lead, derivative, fused)
+            for whole, part in zip((value, first, second, std), numpy_fits, strict=True):
+                whole[k, rest] = part
+    return value, first, second, std
 
 
 def python_adaptive_fits(
@@ -615,15 +638,35 @@ def adaptive_fit(
     vectorised pass, with the arithmetic of :func:`neforward_ros.estimation.fit.polynomial_fits`; or,
     once compiled, the same in one C call (:mod:`neforward_ros.estimation.native_fit`). ``lower``: as
     for :func:`adaptive_fits`."""
+    value, first, second, std, strained = degree_fit(times, values, target, h_max, (order,), lead, derivative, lower)
+    return value[0], first[0], second[0], std[0], strained[0]
+
+
+def degree_fit(
+    times: np.ndarray,
+    values: np.ndarray,
+    target: float,
+    h_max: float,
+    degrees: tuple[int, ...],
+    lead: float,
+    derivative: np.ndarray,
+    lower: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`adaptive_fit` at each degree of ``degrees`` (the first the highest; ``lower`` fused with
+    it alone), in one C call (:func:`degree_fits`). Five (D, n)."""
     library = native_fit.FIT.get()
     if library is not None:
         got = native_fit.fit(
-            library, times, values, target, *_ladder_and_leads(h_max, lead), order, derivative, GAMMA, ROUGHNESS,
-            _GAIN, FLOOR, GROWTH, LATTICE, lower,
+            library, times, values, target, *_ladder_and_leads(h_max, lead), degrees[0], derivative, GAMMA,
+            ROUGHNESS, _GAIN, FLOOR, GROWTH, LATTICE, lower, tuple(degrees[1:]),
         )  # fmt: skip
         if got is not None:
             return got
-    return python_adaptive_fit(times, values, target, h_max, order, lead, derivative, lower)
+    fused_with = [lower] + [None] * (len(degrees) - 1)
+    fits = [python_adaptive_fit(times, values, target, h_max, degree, lead, derivative, fused)
+            for degree, fused in zip(degrees, fused_with, strict=True)]  # fmt: skip
+    value, first, second, std, strained = (np.stack(entries) for entries in zip(*fits, strict=True))
+    return value, first, second, std, strained
 
 
 def python_adaptive_fit(

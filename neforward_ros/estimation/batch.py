@@ -14,11 +14,14 @@ from typing import Any
 import numpy as np
 
 from neforward_ros.errors import InputError
-from neforward_ros.estimation import degree_choice
-from neforward_ros.estimation.adaptive import adaptive_fits
+from neforward_ros.estimation import degree_choice, native_fit
+from neforward_ros.estimation.adaptive import GAMMA, adaptive_fits, degree_fits
 from neforward_ros.estimation.coverage import Support, covered_mask
 from neforward_ros.estimation.fit import DEFAULT_WINDOW, check_settings, degrees, local_polynomial
 from neforward_ros.stamps import NS, relative_seconds
+
+CHOICE_BLOCK = 32768
+"""Targets whose degrees the default's batch fit chooses at a time (:func:`chosen_degree_fits`)."""
 
 
 def estimate_derivatives(
@@ -187,19 +190,49 @@ def chosen_degree_fits(
     (:func:`~neforward_ros.estimation.degree_choice.choose`), the estimates at ``stamps_ns`` (M,)
     where ``counted`` (M, m or 1) pooled. Position, velocity, acceleration and its stated standard
     deviation (M, m); with ``velocity`` (T, m), the acceleration is the velocities' derivative and
-    their fit's degree is the position's too."""
-    fits = []
-    for degree in degree_choice.DEGREES:
-        if velocity is None:
-            fits.append(adaptive_fits(t, q, targets, half_width, degree, half_width))
-        else:
-            position = adaptive_fits(t, q, targets, half_width, degree, half_width)[0]
-            value, first, _, stated = adaptive_fits(t, velocity, targets, half_width, degree, half_width, derivative=1)
-            fits.append((position, value, first, stated))
-    options = [np.stack(entries) for entries in zip(*fits, strict=True)]
-    pooled = np.broadcast_to(counted, options[2].shape[1:])
-    chosen, error = degree_choice.choose(
-        stamps_ns, np.where(pooled, options[2], np.nan), np.where(pooled, options[3], np.nan)
-    )
+    their fit's degree is the position's too.
+
+    A block of :data:`CHOICE_BLOCK` targets at a time, each with the estimates of the second before
+    its first (fitted again: a few percent more fits), which its first choices pool: every degree's
+    estimates of a whole recording at once took several times the memory of its result (300,000
+    targets of 8 joints: about 1 GB, which a virtual machine hands out at about 1.5 s a GB)."""
+    m = q.shape[1]
+    out = [np.empty((len(targets), m)) for _ in range(4)]
+    counted = np.broadcast_to(counted, (len(targets), m))
+    memory_ns = round(degree_choice.MEMORY * NS)
+    for start in range(0, len(targets), CHOICE_BLOCK):
+        stop = min(start + CHOICE_BLOCK, len(targets))
+        first = int(np.searchsorted(stamps_ns, stamps_ns[start] - memory_ns, side="right"))
+        part, kept = slice(first, stop), slice(start - first, None)
+        got = _chosen_block(t, q, targets[part], half_width, stamps_ns[part], counted[part], velocity)
+        for whole, block in zip(out, got, strict=True):
+            whole[start:stop] = block[kept]
+    return out[0], out[1], out[2], out[3]
+
+
+def _chosen_block(
+    t: np.ndarray,
+    q: np.ndarray,
+    targets: np.ndarray,
+    half_width: float,
+    stamps_ns: np.ndarray,
+    counted: np.ndarray,
+    velocity: np.ndarray | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`chosen_degree_fits` of one block of targets, with ``counted`` (M, m)."""
+    degrees = degree_choice.DEGREES
+    options = degree_fits(t, q, targets, half_width, degrees, half_width)  # each (D, M, m)
+    if velocity is not None:
+        value, first, _, stated = degree_fits(t, velocity, targets, half_width, degrees, half_width, derivative=1)
+        options = (options[0], value, first, stated)
+    library = native_fit.FIT.get()
+    if library is not None:
+        chosen, std = native_fit.choose_degrees(library, stamps_ns, round(degree_choice.MEMORY * NS), options[2],
+                                                options[3], counted, degree_choice.LEAST, GAMMA)  # fmt: skip
+    else:
+        chosen, error = degree_choice.choose(
+            stamps_ns, np.where(counted, options[2], np.nan), np.where(counted, options[3], np.nan)
+        )
+        std = degree_choice.chosen_std(options[2], options[3], chosen, error)
     q_at, qd_at, qdd_at = (degree_choice.pick(entries, chosen) for entries in options[:3])
-    return q_at, qd_at, qdd_at, degree_choice.chosen_std(options[2], options[3], chosen, error)
+    return q_at, qd_at, qdd_at, std

@@ -6,13 +6,19 @@ its arrays: about 0.2 ms a message, which at 2 kHz is most of the node's budget.
 does the same. Its arithmetic differs from numpy's only in the order of additions: the windows are
 nested, so each sample's powers are added once, ring by ring from the smallest window outwards (in
 the largest window's unit, rescaled per level: inner sums never come from differences of larger
-ones), where the Python function fits each level on its own; and the normal equations are inverted
-by a Cholesky factorisation where numpy calls LAPACK. The two agree to rounding (tested, with the
-same window chosen). Two degrees fused (the default's 6 and 4) come from one call: the lower degree's
-normal equations are the leading rows and columns of the higher's, so both share the power sums and
-the noise reading. A whole recording's targets (``adaptive_fits``) take each block's sixth differences
-from one pass, the same numbers added in the same order as for one target: the node and the bag tool
-give bitwise the same estimates (tested).
+ones), where the Python function fits each level on its own; and the normal equations are solved
+through a Cholesky factor where numpy calls LAPACK. The two agree to rounding (tested, with the same
+window chosen). Several degrees come from one call: a lower degree's normal equations are the leading
+rows and columns of the higher's, so they share the power sums, the noise reading and, per level, one
+Cholesky factor L, the first three columns of L^-1 and L^-1 b, from which each degree's coefficients and
+variance factors are partial sums (two degrees fused, ``lower``; or further degrees each with its own
+windows chosen, ``also``: the default's 4 and 2 besides its 6, the same numbers as one call per degree).
+A whole recording's targets (``adaptive_fits``) take each block's sixth differences from one pass, the
+same numbers added in the same order as for one target: the node and the bag tool give bitwise the
+same estimates (tested). The default's degree choice (:mod:`.degree_choice`) is here too: the node's
+(``choose_last``, the last second's score terms summed directly) and the whole recording's
+(``choose_degrees``, sliding sums added up afresh where their rounding could show: the two agree to
+about 1e-12, tested).
 
 Compiled with the system's C compiler (``cc``, ``$CC``) on first use, in a thread, and kept in the
 disk cache (:mod:`neforward_ros.disk_cache`, ``kernels/``); until it is ready, and where there is no
@@ -35,6 +41,8 @@ WORTH_WAITING = 5000
 """Targets from which a batch waits for the build rather than fitting in numpy meanwhile."""
 MAX_ORDER = 15
 """The highest polynomial degree the C function takes (the Python function serves above it)."""
+MAX_ALSO = 4
+"""The further degrees one call fits besides its own (``MAX_ALSO`` in the C source)."""
 FLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
 """-O3 vectorises the loops over joints (each joint's sums still added in order: no reassociation
 without fast-math): a third faster than -O1 for a humanoid's 33 joints, built in 0.3 s."""
@@ -42,6 +50,8 @@ without fast-math): a third faster than -O1 for a humanoid's 33 joints, built in
 SOURCE = r"""
 #include <math.h>
 #include <stdlib.h>
+
+#define MAX_ALSO 4  /* further degrees one call fits besides its own */
 
 static long lower_bound(const double *t, long count, double x) {  /* first index with t >= x */
     long lo = 0, hi = count;
@@ -59,40 +69,6 @@ static long upper_bound(const double *t, long count, double x) {  /* first index
 static double nmax(double a, double b) { return isnan(a) || isnan(b) ? NAN : (a > b ? a : b); }
 static double nmin(double a, double b) { return isnan(a) || isnan(b) ? NAN : (a < b ? a : b); }
 
-/* Inverse of the symmetric positive definite d x d matrix a (row-major) into inv; 0 if a is not
-   positive definite to rounding. */
-static int spd_inverse(const double *a, long d, double *inv) {
-    double low[16 * 16], x[16 * 16];
-    for (long i = 0; i < d * d; i++) { low[i] = 0.0; x[i] = 0.0; }
-    for (long j = 0; j < d; j++) {
-        double pivot = a[j * d + j];
-        for (long k = 0; k < j; k++) pivot -= low[j * d + k] * low[j * d + k];
-        if (!(pivot > 0.0)) return 0;
-        low[j * d + j] = sqrt(pivot);
-        for (long i = j + 1; i < d; i++) {
-            double s = a[i * d + j];
-            for (long k = 0; k < j; k++) s -= low[i * d + k] * low[j * d + k];
-            low[i * d + j] = s / low[j * d + j];
-        }
-    }
-    for (long i = 0; i < d; i++) {  /* x = low^-1, lower triangular */
-        x[i * d + i] = 1.0 / low[i * d + i];
-        for (long j = 0; j < i; j++) {
-            double s = 0.0;
-            for (long k = j; k < i; k++) s += low[i * d + k] * x[k * d + j];
-            x[i * d + j] = -s * x[i * d + i];
-        }
-    }
-    for (long i = 0; i < d; i++)
-        for (long j = 0; j <= i; j++) {
-            double s = 0.0;
-            for (long k = i; k < d; k++) s += x[k * d + i] * x[k * d + j];
-            inv[i * d + j] = s;
-            inv[j * d + i] = s;
-        }
-    return 1;
-}
-
 /* the weights of the sixth divided difference of t[0], t[s], ..., t[6 s], scaled to unit norm: the
    combination of seven samples that vanishes on every polynomial of degree 5 through their stamps */
 static void divided_weights(const double *t, long s, double *w) {
@@ -109,29 +85,88 @@ static void divided_weights(const double *t, long s, double *w) {
     for (long k = 0; k < 7; k++) w[k] *= norm;
 }
 
-/* One level's fit of degree `order` from the power sums (sums[k] = sum of u^k, moments[k n + j] = sum
-   of u^k y_j, u in the largest window's unit h0) into fit (n, 5): value, first and second derivative,
-   and the chosen derivative's variance factor for unit noise. 0 if the normal equations are singular. */
+/* One level's fits of several degrees from the same power sums (sums[k] = sum of u^k, moments[k n + j]
+   = sum of u^k y_j, u in the largest window's unit h0), into fit[g] (n, 5) for each g with wanted[g]:
+   value, first and second derivative, and the chosen derivative's variance factor for unit noise.
+   A degree's normal equations are the leading rows and columns of a higher one's, so one Cholesky
+   factor L of the highest's serves every degree (its leading block), as do the first three columns of
+   X = L^-1 and y = X b (b the scaled moments): the coefficients (A^-1 b)_q = sum_{i=q}^{e} X[i][q] y[i]
+   and the variance factors (A^-1)_qq = sum_{i=q}^{e} X[i][q]^2, each sum up to the degree e.
+   Returns the number of leading columns factored (the equations singular beyond): degree e's fit is
+   made where e + 1 is at most that. */
+static long level_fits(const double *sums, const double *moments, long n, long ndeg, const long *degree,
+                       const int *wanted, double *const *fit, double h, double h0, const long *derivative) {
+    long d = 0;
+    for (long g = 0; g < ndeg; g++) if (wanted[g] && degree[g] + 1 > d) d = degree[g] + 1;
+    double low[16 * 16], inverse_diagonal[16], x[3 * 16], scale[33], r = h0 / h;
+    scale[0] = 1.0;
+    for (long k = 1; k <= 2 * (d - 1); k++) scale[k] = scale[k - 1] * r;
+    long ok = d;
+    for (long j = 0; j < d && ok == d; j++) {
+        double pivot = sums[2 * j] * scale[2 * j];
+        for (long k = 0; k < j; k++) pivot -= low[j * 16 + k] * low[j * 16 + k];
+        if (!(pivot > 0.0)) { ok = j; break; }
+        low[j * 16 + j] = sqrt(pivot);
+        inverse_diagonal[j] = 1.0 / low[j * 16 + j];
+        for (long i = j + 1; i < d; i++) {
+            double s = sums[i + j] * scale[i + j];
+            for (long k = 0; k < j; k++) s -= low[i * 16 + k] * low[j * 16 + k];
+            low[i * 16 + j] = s * inverse_diagonal[j];
+        }
+    }
+    long columns = ok < 3 ? ok : 3;
+    for (long q = 0; q < columns; q++) {  /* column q of X = L^-1: X[i][q], i >= q */
+        x[q * 16 + q] = inverse_diagonal[q];
+        for (long i = q + 1; i < ok; i++) {
+            double s = 0.0;
+            for (long k = q; k < i; k++) s += low[i * 16 + k] * x[q * 16 + k];
+            x[q * 16 + i] = -s * inverse_diagonal[i];
+        }
+    }
+    double y[(ok > 0 ? ok : 1) * n], c[3 * n];  /* y = X b, row by row, every joint at once */
+    for (long i = 0; i < ok; i++) {
+        double *row = y + i * n;
+        for (long j = 0; j < n; j++) row[j] = moments[i * n + j] * scale[i];
+        for (long k = 0; k < i; k++) {
+            double factor = low[i * 16 + k];
+            const double *earlier = y + k * n;
+            for (long j = 0; j < n; j++) row[j] -= factor * earlier[j];
+        }
+        for (long j = 0; j < n; j++) row[j] *= inverse_diagonal[i];
+    }
+    /* the coefficients summed over i = q, q + 1, ... and each degree's taken as the sums reach it */
+    for (long k = 0; k < 3 * n; k++) c[k] = 0.0;
+    double per_h = 1.0 / h, per_h2 = 2.0 / (h * h);
+    for (long i = 0; i < ok; i++) {
+        for (long q = 0; q < columns && q <= i; q++) {
+            double factor = x[q * 16 + i];
+            const double *row = y + i * n;
+            for (long j = 0; j < n; j++) c[q * n + j] += factor * row[j];
+        }
+        for (long g = 0; g < ndeg; g++) {
+            if (!wanted[g] || degree[g] != i) continue;
+            double first = 0.0, second = 0.0;
+            for (long k = 1; k <= i && columns > 1; k++) first += x[16 + k] * x[16 + k];
+            for (long k = 2; k <= i && columns > 2; k++) second += x[32 + k] * x[32 + k];
+            first *= per_h * per_h;
+            second *= per_h2 * per_h2;
+            double *f = fit[g];
+            for (long j = 0; j < n; j++) {
+                f[j * 5] = c[j];
+                f[j * 5 + 1] = c[n + j] * per_h;
+                f[j * 5 + 2] = c[2 * n + j] * per_h2;
+                f[j * 5 + 3] = derivative[j] == 2 ? second : first;
+            }
+        }
+    }
+    return ok;
+}
+
+/* level_fits of one degree: 0 if its normal equations are singular. */
 static int level_fit(const double *sums, const double *moments, long n, long order, double h, double h0,
                      const long *derivative, double *fit) {
-    long d = order + 1;
-    double gram[16 * 16], inv[16 * 16], r = h0 / h, scale[33];
-    scale[0] = 1.0;
-    for (long k = 1; k <= 2 * order; k++) scale[k] = scale[k - 1] * r;
-    for (long a = 0; a < d; a++)
-        for (long b = 0; b < d; b++) gram[a * d + b] = sums[a + b] * scale[a + b];
-    if (!spd_inverse(gram, d, inv)) return 0;
-    for (long j = 0; j < n; j++) {
-        double c[3] = {0.0, 0.0, 0.0};
-        for (long q = 0; q < 3; q++)
-            for (long k = 0; k < d; k++) c[q] += inv[q * d + k] * (moments[k * n + j] * scale[k]);
-        double *f = fit + j * 5;
-        f[0] = c[0];
-        f[1] = c[1] / h;
-        f[2] = 2.0 * c[2] / (h * h);
-        f[3] = derivative[j] == 2 ? 4.0 * inv[2 * d + 2] / (h * h * h * h) : inv[1 * d + 1] / (h * h);
-    }
-    return 1;
+    int wanted = 1;
+    return level_fits(sums, moments, n, 1, &order, &wanted, &fit, h, h0, derivative) >= order + 1;
 }
 
 /* The ICI rule over the `valid` levels' fits (valid, n, 5) of one degree, into out (5, n): value,
@@ -206,35 +241,61 @@ static void sixths(const double *times, const double *values, long n, long lo, l
    pre_count), covering this target's largest window, or NULL: computed here. */
 static int fit_target(long count, const double *times, const double *values, long n, double target,
                       long nlevels, const double *levels, const double *leads, long order, long lower,
-                      const long *derivative, double gamma, double roughness, double sixth_gain,
-                      double floor_, double growth, double lattice, const double *pre, long pre_lo, long pre_count,
+                      long nalso, const long *also, const long *derivative, double gamma, double roughness,
+                      double sixth_gain, double floor_, double growth, double lattice, const double *pre, long pre_lo,
+                      long pre_count,
                       long pre_strides, double *out) {
-    long d = order + 1, lo[64], hi[64], valid = 0, valid_low = 0;
-    if (nlevels > 64 || d > 16 || n < 1 || lower < 0 || lower >= order) return 1;
+    long d = order + 1, lo[64], hi[64], valid = 0, valid_low = 0, valid_also[MAX_ALSO], also_at[MAX_ALSO + 1];
+    if (nlevels > 64 || d > 16 || n < 1 || lower < 0 || lower >= order || nalso < 0 || nalso > MAX_ALSO) return 1;
+    for (long a = 0; a < nalso; a++) {
+        if (also[a] < 1 || also[a] >= order) return 1;
+        valid_also[a] = 0;
+    }
     for (long l = 0; l < nlevels; l++) {
-        lo[l] = lower_bound(times, count, (target + leads[l]) - 2.0 * levels[l]);
-        hi[l] = upper_bound(times, count, target + leads[l]);
+        double start = (target + leads[l]) - 2.0 * levels[l], end = target + leads[l];
+        if (l > 0 && start >= (target + leads[0]) - 2.0 * levels[0] && end <= target + leads[0]) {
+            /* inside the largest window: its samples are searched alone */
+            lo[l] = lo[0] + lower_bound(times + lo[0], hi[0] - lo[0], start);
+            hi[l] = lo[0] + upper_bound(times + lo[0], hi[0] - lo[0], end);
+        } else {
+            lo[l] = lower_bound(times, count, start);
+            hi[l] = upper_bound(times, count, end);
+        }
         if (hi[l] - lo[l] >= order + 3 && valid == l) valid = l + 1;
         if (hi[l] - lo[l] >= lower + 3 && valid_low == l) valid_low = l + 1;
+        for (long a = 0; a < nalso; a++)
+            if (hi[l] - lo[l] >= also[a] + 3 && valid_also[a] == l) valid_also[a] = l + 1;
     }
     if (valid == 0) return 1;
     if (lower == 0) valid_low = 0;
     long width = hi[0] - lo[0], rings = valid > valid_low ? valid : valid_low;
+    also_at[0] = 0;  /* each further degree's level fits, one after another */
+    for (long a = 0; a < nalso; a++) {
+        if (valid_also[a] > rings) rings = valid_also[a];
+        also_at[a + 1] = also_at[a] + valid_also[a];
+    }
+    double *fits_also = nalso > 0 ? malloc(sizeof(double) * 5 * (size_t)also_at[nalso] * (size_t)n) : NULL;
+    if (nalso > 0 && fits_also == NULL) return 2;
     double *scratch = malloc(sizeof(double) * (d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n
-                                               + (size_t)rings * n + 2 * (size_t)n + (size_t)width));
-    if (scratch == NULL) return 2;
+                                               + (size_t)rings * n + 2 * (size_t)n + (size_t)width * n));
+    if (scratch == NULL) { free(fits_also); return 2; }
     double *moments = scratch, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
     double *out_low = fits_low + 5 * (size_t)valid_low * n;
     double *white = out_low + 5 * (size_t)n, *step = white + n, *spread = step + n;
     double *changes = spread + 4 * n;  /* after previous, candidate, alive: (rings, n) */
     double *noise = changes + (size_t)rings * n, *noise_low = noise + n, *changed = noise_low + n;
-    for (long j = 0; j < n; j++) {  /* each level's changes between consecutive samples (changes_within) */
-        changed[0] = 0.0;  /* the changes up to each sample of the largest window, which holds the others */
-        for (long i = 1; i < width; i++)
-            changed[i] = changed[i - 1] + (values[(lo[0] + i) * n + j] != values[(lo[0] + i - 1) * n + j]);
-        for (long l = 0; l < rings; l++)
-            changes[l * n + j] = hi[l] - 1 > lo[l] ? changed[hi[l] - 1 - lo[0]] - changed[lo[l] - lo[0]] : 0.0;
+    /* each level's changes between consecutive samples (changes_within), from the changes up to each
+       sample of the largest window, which holds the others (width, n), every column at once */
+    for (long j = 0; j < n; j++) changed[j] = 0.0;
+    for (long i = 1; i < width; i++) {
+        const double *now = values + (lo[0] + i) * n, *before = now - n;
+        double *count = changed + i * n;
+        for (long j = 0; j < n; j++) count[j] = count[j - n] + (now[j] != before[j] ? 1.0 : 0.0);
     }
+    for (long l = 0; l < rings; l++)
+        for (long j = 0; j < n; j++)
+            changes[l * n + j] = hi[l] - 1 > lo[l]
+                ? changed[(hi[l] - 1 - lo[0]) * n + j] - changed[(lo[l] - lo[0]) * n + j] : 0.0;
     /* the noise, from the largest window, every column at once (rows are contiguous): the samples'
        deviation, the mean |sixth difference|, the smallest non-zero step */
     const double *window = values + lo[0] * n;
@@ -289,6 +350,9 @@ static int fit_target(long count, const double *times, const double *values, lon
                 }
                 previous[j] = noise;
             }
+            int any = 0;  /* no column's noise can grow past its stride: the larger ones change nothing */
+            for (long j = 0; j < n; j++) any |= alive[j] > 0.0;
+            if (!any) break;
         }
     }
     for (long j = 0; j < n; j++) if (isinf(step[j]) || width < 8) step[j] = 0.0;
@@ -312,14 +376,18 @@ static int fit_target(long count, const double *times, const double *values, lon
                 }
             }
         inner_lo = lo[l]; inner_hi = hi[l];
-        if (l < valid && !level_fit(sums, moments, n, order, levels[l], h0, derivative, fits + l * n * 5)) {
-            status = 1;
-            break;
+        long degree[2 + MAX_ALSO] = {order, lower};
+        int wanted[2 + MAX_ALSO] = {l < valid, l < valid_low};
+        double *fit[2 + MAX_ALSO] = {fits + l * n * 5, fits_low + l * n * 5};
+        for (long a = 0; a < nalso; a++) {
+            degree[2 + a] = also[a];
+            wanted[2 + a] = l < valid_also[a];
+            fit[2 + a] = fits_also + (also_at[a] + l) * n * 5;
         }
-        if (l < valid_low && !level_fit(sums, moments, n, lower, levels[l], h0, derivative, fits_low + l * n * 5)) {
-            status = 1;
-            break;
-        }
+        long factored = level_fits(sums, moments, n, 2 + nalso, degree, wanted, fit, levels[l], h0, derivative);
+        for (long g = 0; g < 2 + nalso; g++)
+            if (wanted[g] && degree[g] + 1 > factored) status = 1;
+        if (status != 0) break;
     }
     if (status == 0) {
         choose(fits, valid, n, lo, hi, changes, derivative, white, step, spread, gamma, roughness, floor_, out,
@@ -335,8 +403,12 @@ static int fit_target(long count, const double *times, const double *values, lon
                     for (long q = 0; q < 5; q++) out[q * n + j] = out_low[q * n + j];
             }
         }
+        for (long a = 0; a < nalso; a++)  /* each further degree's own choice, not fused */
+            choose(fits_also + also_at[a] * n * 5, valid_also[a], n, lo, hi, changes, derivative, white, step, spread,
+                   gamma, roughness, floor_, out + (a + 1) * 5 * n, noise_low);
     }
     free(scratch);
+    free(fits_also);
     return status;
 }
 
@@ -349,10 +421,10 @@ static int fit_target(long count, const double *times, const double *values, lon
    runs out. */
 int adaptive_fit(long count, const double *times, const double *values, long n, double target,
                  long nlevels, const double *levels, const double *leads, long order, long lower,
-                 const long *derivative, double gamma, double roughness, double sixth_gain,
-                 double floor_, double growth, double lattice, double *out) {
-    return fit_target(count, times, values, n, target, nlevels, levels, leads, order, lower, derivative, gamma,
-                      roughness, sixth_gain, floor_, growth, lattice, NULL, 0, 0, 0, out);
+                 long nalso, const long *also, const long *derivative, double gamma, double roughness,
+                 double sixth_gain, double floor_, double growth, double lattice, double *out) {
+    return fit_target(count, times, values, n, target, nlevels, levels, leads, order, lower, nalso, also,
+                      derivative, gamma, roughness, sixth_gain, floor_, growth, lattice, NULL, 0, 0, 0, out);
 }
 
 /* adaptive_fit at each of ntargets targets over the whole of times, values; derivative (n,); out
@@ -361,8 +433,9 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
    each target's work otherwise; the numbers are the same as adaptive_fit's one target at a time. */
 void adaptive_fits(long count, const double *times, const double *values, long n, long ntargets,
                    const double *targets, long nlevels, const double *levels, const double *leads,
-                   long order, long lower, const long *derivative, double gamma, double roughness,
-                   double sixth_gain, double floor_, double growth, double lattice, double *out, int *status) {
+                   long order, long lower, long nalso, const long *also, const long *derivative, double gamma,
+                   double roughness, double sixth_gain, double floor_, double growth, double lattice, double *out,
+                   int *status) {
     const long block = 256;
     for (long first = 0; first < ntargets; first += block) {
         long last = first + block < ntargets ? first + block : ntargets, lo = count, hi = 0, widest = 0;
@@ -382,9 +455,8 @@ void adaptive_fits(long count, const double *times, const double *values, long n
         if (pre != NULL) sixths(times, values, n, lo, hi, strides, pre);
         for (long m = first; m < last; m++)
             status[m] = fit_target(count, times, values, n, targets[m], nlevels, levels, leads, order, lower,
-                                   derivative, gamma, roughness, sixth_gain, floor_, growth, lattice, pre, lo,
-                                   hi - lo,
-                                   pre == NULL ? 0 : strides, out + m * 5 * n);
+                                   nalso, also, derivative, gamma, roughness, sixth_gain, floor_, growth, lattice,
+                                   pre, lo, hi - lo, pre == NULL ? 0 : strides, out + m * (1 + nalso) * 5 * n);
         free(pre);
     }
 }
@@ -428,6 +500,123 @@ void causal_candidates(long count, const double *times, const double *values, lo
     free(sums);
     free(moments);
     free(fit);
+}
+
+/* One estimate's terms of each degree's score (a_g - a_0)^2 + 2 s_g^2 into score (ndeg), and 1 into
+   score[ndeg] where it counts (counted, and every degree's estimate and deviation finite), else 0
+   throughout. a, s: degree g's acceleration and stated deviation at a[g * acc_g], s[g * std_g]. */
+static void degree_scores(long ndeg, const double *a, long acc_g, const double *s, long std_g, int counted,
+                          double *score) {
+    int finite = counted;
+    for (long g = 0; g < ndeg && finite; g++) finite = isfinite(a[g * acc_g]) && isfinite(s[g * std_g]);
+    for (long g = 0; g < ndeg; g++) {
+        double apart = a[g * acc_g] - a[0], spread = s[g * std_g];
+        score[g] = finite ? apart * apart + 2.0 * spread * spread : 0.0;
+    }
+    score[ndeg] = finite ? 1.0 : 0.0;
+}
+
+/* One estimate's degree (degree_choice._least) and the deviation stated with it (chosen_std), from its
+   window's score sums total[g * n] and count of estimates counted: the least mean score, unless fewer
+   than `least` counted or (where this estimate counts) it leaves the reference's by more than gamma of
+   their combined deviations. */
+static void decide(long ndeg, long n, const double *total, double count, const double *a, long acc_g,
+                   const double *s, long std_g, int counted, long least, double gamma, long *chosen,
+                   double *stated) {
+    double number = count > 1.0 ? count : 1.0;
+    int enough = count >= (double)least;
+    long best = 0;
+    if (enough)
+        for (long g = 1; g < ndeg; g++)
+            if (total[g * n] / number < total[best * n] / number) best = g;
+    double apart = a[best * acc_g] - a[0], spread = s[best * std_g];
+    if (counted && fabs(apart) > gamma * sqrt(spread * spread + s[0] * s[0])) {
+        best = 0;
+        apart = 0.0;
+        spread = s[0];
+    }
+    double error = enough ? nmax(total[best * n] / number - 0.5 * (total[0] / number), 0.0) : 0.0;
+    double beyond = apart * apart - s[0] * s[0];
+    *chosen = best;
+    *stated = sqrt(nmax(spread * spread + nmax(beyond, 0.0), error));
+}
+
+/* degree_choice.choose and chosen_std over m estimates in stamp order (stamps, ns): per joint, each
+   degree's mean score over the estimates stamped in (s - span, s] that count, as sliding sums; where a
+   sum has taken in more than `precision` times itself since it was last added up (or `refresh`
+   estimates have passed), added up afresh over its window, so that it stays within about 1e-14 of
+   the direct sums the node adds (choose_last). acc, std: degree g's acceleration and stated deviation
+   of estimate t, joint j at [g * _g + t * _t + j]; counted (m, n). Into chosen (m, n) the degree index
+   and into stated (m, n) the standard deviation stated with it. */
+void choose_degrees(long m, long ndeg, long n, const long long *stamps, long long span, const double *acc,
+                    long acc_g, long acc_t, const double *std, long std_g, long std_t,
+                    const unsigned char *counted, long least, double gamma, double precision, long refresh,
+                    long *chosen, double *stated) {
+    long row = ndeg + 1;  /* each estimate's scores (m, n, ndeg + 1), whether it counts last */
+    double *scores = malloc(sizeof(double) * ((size_t)m * n * row + (size_t)(2 * ndeg + 1) * n));
+    if (scores == NULL) {
+        for (long k = 0; k < m * n; k++) { chosen[k] = 0; stated[k] = NAN; }
+        return;
+    }
+    double *total = scores + (size_t)m * n * row, *passed = total + ndeg * n, *count = passed + ndeg * n;
+    for (long k = 0; k < (2 * ndeg + 1) * n; k++) total[k] = 0.0;
+    for (long t = 0; t < m; t++)
+        for (long j = 0; j < n; j++)
+            degree_scores(ndeg, acc + t * acc_t + j, acc_g, std + t * std_t + j, std_g, counted[t * n + j],
+                          scores + (t * n + j) * row);
+    long first = 0, since = 0;
+    for (long t = 0; t < m; t++) {
+        for (long j = 0; j < n; j++) {  /* this estimate joins its window */
+            const double *score = scores + (t * n + j) * row;
+            count[j] += score[ndeg];
+            for (long g = 0; g < ndeg; g++) { total[g * n + j] += score[g]; passed[g * n + j] += score[g]; }
+        }
+        for (; stamps[first] <= stamps[t] - span; first++)  /* the estimates a second old leave it */
+            for (long j = 0; j < n; j++) {
+                const double *score = scores + (first * n + j) * row;
+                count[j] -= score[ndeg];
+                for (long g = 0; g < ndeg; g++) total[g * n + j] -= score[g];
+            }
+        int all = ++since >= refresh;
+        if (all) since = 0;
+        for (long j = 0; j < n; j++) {
+            int loose = all;
+            for (long g = 0; g < ndeg; g++) loose |= passed[g * n + j] > precision * total[g * n + j];
+            if (!loose) continue;
+            for (long g = 0; g < ndeg; g++) total[g * n + j] = 0.0;
+            for (long i = first; i <= t; i++)
+                for (long g = 0; g < ndeg; g++) total[g * n + j] += scores[(i * n + j) * row + g];
+            for (long g = 0; g < ndeg; g++) passed[g * n + j] = total[g * n + j];
+        }
+        for (long j = 0; j < n; j++)
+            decide(ndeg, n, total + j, count[j], acc + t * acc_t + j, acc_g, std + t * std_t + j, std_g,
+                   counted[t * n + j], least, gamma, chosen + t * n + j, stated + t * n + j);
+    }
+    free(scores);
+}
+
+/* The node's choice (degree_choice.DegreePool): the last of m estimates' degrees and deviations (n).
+   scores (m, ndeg + 1, n): each estimate's score terms and whether it counts (degree_scores' row,
+   joint by joint); the last's are made here from acc, std (ndeg, n) and counted (n). Their sums over
+   all m (the window) are added up directly, estimate by estimate. */
+void choose_last(long m, long ndeg, long n, double *scores, const double *acc, const double *std,
+                 const unsigned char *counted, long least, double gamma, long *chosen, double *stated) {
+    long row = (ndeg + 1) * n;
+    double total[(3 + MAX_ALSO) * n], score[3 + MAX_ALSO];
+    if (ndeg > 2 + MAX_ALSO || m < 1) return;
+    double *last = scores + (m - 1) * row;
+    for (long j = 0; j < n; j++) {
+        degree_scores(ndeg, acc + j, n, std + j, n, counted[j], score);
+        for (long g = 0; g <= ndeg; g++) last[g * n + j] = score[g];
+    }
+    for (long k = 0; k < row; k++) total[k] = 0.0;
+    for (long t = 0; t < m; t++) {
+        const double *each = scores + t * row;
+        for (long k = 0; k < row; k++) total[k] += each[k];
+    }
+    for (long j = 0; j < n; j++)
+        decide(ndeg, n, total + j, total[ndeg * n + j], acc + j, n, std + j, n, counted[j], least, gamma,
+               chosen + j, stated + j);
 }
 """
 
@@ -490,15 +679,22 @@ class NativeAdaptiveFit:
 def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
     double, pointer, long = ctypes.c_double, ctypes.c_void_p, ctypes.c_long
     library.adaptive_fit.argtypes = [long, pointer, pointer, long, double, long, pointer, pointer, long, long,
-                                     pointer, double, double, double, double, double, double, pointer]  # fmt: skip
+                                     long, pointer, pointer, double, double, double, double, double, double,
+                                     pointer]  # fmt: skip
     library.adaptive_fit.restype = ctypes.c_int
     library.adaptive_fits.argtypes = [long, pointer, pointer, long, long, pointer, long, pointer, pointer,
-                                      long, long, pointer, double, double, double, double, double, double,
-                                      pointer, pointer]  # fmt: skip
+                                      long, long, long, pointer, pointer, double, double, double, double, double,
+                                      double, pointer, pointer]  # fmt: skip
     library.adaptive_fits.restype = None
     library.causal_candidates.argtypes = [long, pointer, pointer, long, double, long, pointer, long, pointer, long,
                                           pointer, pointer, pointer]  # fmt: skip
     library.causal_candidates.restype = None
+    library.choose_degrees.argtypes = [long, long, long, pointer, ctypes.c_longlong, pointer, long, long, pointer,
+                                       long, long, pointer, long, double, double, long, pointer, pointer]  # fmt: skip
+    library.choose_degrees.restype = None
+    library.choose_last.argtypes = [long, long, long, pointer, pointer, pointer, pointer, long, double, pointer,
+                                    pointer]  # fmt: skip
+    library.choose_last.restype = None
     return library
 
 
@@ -522,17 +718,18 @@ def fit(
     growth: float,
     lattice: float,
     lower: int | None = None,
+    also: tuple[int, ...] = (),
 ) -> tuple[np.ndarray, ...] | None:
-    """The C function's value, first and second derivative, standard deviation and strain (n,) each;
-    None where the Python function must serve (too few samples, an order above MAX_ORDER). ``lower``:
-    a second degree fused with ``order`` (:func:`neforward_ros.estimation.adaptive.fused`), in the same
-    call."""
+    """The C function's value, first and second derivative, standard deviation and strain (D, n) each,
+    for ``order`` and then each degree of ``also`` (D = 1 + len(also)); None where the Python function
+    must serve (too few samples, an order above MAX_ORDER). ``lower``: a second degree fused with ``order``
+    (:func:`neforward_ros.estimation.adaptive.fused`), in the same call; ``also``: as for :func:`fits`."""
     got = fits(library, times, values, np.array([target], dtype=float), half_widths, leads, order, derivative,
-               gamma, roughness, sixth_gain, floor, growth, lattice, lower)  # fmt: skip
+               gamma, roughness, sixth_gain, floor, growth, lattice, lower, also)  # fmt: skip
     if got is None or not got[1][0]:
         return None
     out = got[0][0]
-    return out[0], out[1], out[2], out[3], out[4] > 0.5
+    return out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4] > 0.5
 
 
 def fits(
@@ -551,17 +748,23 @@ def fits(
     growth: float,
     lattice: float,
     lower: int | None = None,
+    also: tuple[int, ...] = (),
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The C function at every target over the whole of ``times, values``: value, first and second
-    derivative, standard deviation and strain (M, 5, n), and whether each target was done (M,)
-    (where not, the Python function must serve); None above MAX_ORDER. ``lower``: as for :func:`fit`."""
+    derivative, standard deviation and strain (M, 1 + len(also), 5, n) for ``order`` and each further
+    degree of ``also`` (each below ``order``, with its own windows chosen: the numbers of a call at that
+    degree alone), and whether each target was done (M,) (where not, the Python function must serve);
+    None above MAX_ORDER. ``lower``: as for :func:`fit`."""
     if order > MAX_ORDER or (lower is not None and not 0 < lower < order):
         return None
+    if len(also) > MAX_ALSO or any(not 0 < degree < order for degree in also):
+        return None
+    degrees = _longs(np.array(also, dtype=int))
     times = np.ascontiguousarray(times, dtype=float)
     values = np.ascontiguousarray(values, dtype=float)
     targets = np.ascontiguousarray(targets, dtype=float)
     n = values.shape[1]
-    out = np.empty((len(targets), 5, n))
+    out = np.empty((len(targets), 1 + len(also), 5, n))
     status = np.empty(len(targets), dtype=np.intc)
     half_widths = np.ascontiguousarray(half_widths, dtype=float)
     leads = np.ascontiguousarray(leads, dtype=float)
@@ -571,7 +774,8 @@ def fits(
         count = part.stop - part.start
         library.adaptive_fits(len(times), times.ctypes.data, values.ctypes.data, n, count,
                               targets[part].ctypes.data, len(half_widths), half_widths.ctypes.data,
-                              leads.ctypes.data, order, lower or 0, derivative.ctypes.data, gamma, roughness,
+                              leads.ctypes.data, order, lower or 0, len(also), degrees.ctypes.data,
+                              derivative.ctypes.data, gamma, roughness,
                               sixth_gain, floor, growth, lattice, out[part].ctypes.data,
                               status[part].ctypes.data)  # fmt: skip
 
@@ -622,6 +826,66 @@ def causal_candidates(
                               None if chosen is None else chosen.ctypes.data, out.ctypes.data)  # fmt: skip
     return out
 
+
+def choose_degrees(
+    library: ctypes.CDLL,
+    stamps_ns: np.ndarray,
+    span_ns: int,
+    accelerations: np.ndarray,
+    stated: np.ndarray,
+    counted: np.ndarray,
+    least: int,
+    gamma: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The C function's :func:`neforward_ros.estimation.degree_choice.choose` and ``chosen_std``: the
+    degree index chosen at each estimate (M, n) and the standard deviation stated with it (M, n), from
+    every degree's accelerations and stated deviations (D, M, n) (any strides, a joint's entries
+    adjacent), which of them count (M, n), at the stamps (M,), integer ns, increasing."""
+    item = accelerations.itemsize
+    for array in (accelerations, stated):
+        if array.dtype != np.float64 or array.strides[2] != item or any(x % item for x in array.strides):
+            raise ValueError("choose_degrees takes float64 arrays whose joints are adjacent")
+    stamps = np.ascontiguousarray(stamps_ns, dtype=np.int64)
+    mask = np.ascontiguousarray(counted, dtype=np.uint8)
+    degrees, m, n = accelerations.shape
+    chosen = np.empty((m, n), dtype=_longs(np.zeros(0)).dtype)
+    out = np.empty((m, n))
+    library.choose_degrees(m, degrees, n, stamps.ctypes.data, int(span_ns), accelerations.ctypes.data,
+                           accelerations.strides[0] // item, accelerations.strides[1] // item, stated.ctypes.data,
+                           stated.strides[0] // item, stated.strides[1] // item, mask.ctypes.data, least, gamma,
+                           CHOICE_PRECISION, CHOICE_REFRESH, chosen.ctypes.data, out.ctypes.data)  # fmt: skip
+    return chosen, out
+
+
+def choose_last(
+    library: ctypes.CDLL,
+    scores: np.ndarray,
+    accelerations: np.ndarray,
+    stated: np.ndarray,
+    counted: np.ndarray,
+    least: int,
+    gamma: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The C function's choice for the node (:class:`neforward_ros.estimation.degree_choice.DegreePool`):
+    the last estimate's degree index (n,) and the standard deviation stated with it (n,). ``scores``
+    (W, D + 1, n), contiguous: the window's estimates' score terms and whether each counts (the last
+    row is written here, from the last estimate's accelerations and stated deviations (D, n) and which
+    count (n,), uint8); their sums added up directly."""
+    rows, degrees, n = scores.shape[0], scores.shape[1] - 1, scores.shape[2]
+    accelerations = np.ascontiguousarray(accelerations, dtype=float)
+    stated = np.ascontiguousarray(stated, dtype=float)
+    chosen = np.zeros(n, dtype=_longs(np.zeros(0)).dtype)
+    out = np.full(n, np.nan)  # an empty window (none begun) states nothing
+    library.choose_last(rows, degrees, n, scores.ctypes.data, accelerations.ctypes.data, stated.ctypes.data,
+                        counted.ctypes.data, least, gamma, chosen.ctypes.data, out.ctypes.data)  # fmt: skip
+    return chosen, out
+
+
+CHOICE_PRECISION = 64.0
+"""How much the values a sliding sum of :func:`choose_degrees` has taken in since it was last added up
+may exceed the sum before it is added up afresh (its rounding stays about 1e-14 of it)."""
+CHOICE_REFRESH = 4096
+"""Estimates after which every sliding sum of :func:`choose_degrees` is added up afresh."""
 
 PARALLEL_TARGETS = 20_000
 """From this many targets on (a whole recording, not a message), :func:`fits` uses every core."""

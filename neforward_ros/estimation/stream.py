@@ -23,7 +23,7 @@ import numpy as np
 
 from neforward_ros.errors import InputError
 from neforward_ros.estimation import degree_choice, native_fit
-from neforward_ros.estimation.adaptive import FLOOR, GAMMA, DeviationPool, adaptive_fit
+from neforward_ros.estimation.adaptive import FLOOR, GAMMA, DeviationPool, adaptive_fit, degree_fit
 from neforward_ros.estimation.causal_choice import DEGREES, ErrorScores, candidates, half_widths, usable
 from neforward_ros.estimation.coverage import uncovered
 from neforward_ros.estimation.estimate import JointEstimate
@@ -476,14 +476,11 @@ class StreamingEstimator:
         if self._scores is not None and values.shape[1] == m:  # a column per joint: scored per joint
             got = _per_joint(self._chosen_fit(group, times, values, target_s, derivative), m, by_velocity, exact)
         elif self._degrees is not None:  # each degree's rule; the degree chosen per joint by the recent estimates
-            fits = [
-                _per_joint(adaptive_fit(times, values, target_s, half, degree, lead, derivative), m, by_velocity, exact)
-                for degree in degree_choice.DEGREES
-            ]
-            options = [np.stack(entries) for entries in zip(*fits, strict=True)]
-            chosen, error = self._degrees.choose(np.asarray(group.joints), options[2], options[3])
-            got = tuple(degree_choice.pick(entries, chosen) for entries in options)
-            got = (*got[:3], degree_choice.chosen_std(options[2], options[3], chosen, error), got[4])
+            fits = degree_fit(times, values, target_s, half, degree_choice.DEGREES, lead, derivative)
+            options = _per_joint(fits, m, by_velocity, exact)  # each (D, m)
+            chosen, std = self._degrees.choose(np.asarray(group.joints), options[2], options[3])
+            got = np.stack(options)[:, chosen, np.arange(m)]  # each entry at each joint's chosen degree
+            got = (*got[:3], std, got[4] > 0.5)
         else:
             fit = adaptive_fit(times, values, target_s, half, settings.degree, lead, derivative, settings.lower_degree)
             got = _per_joint(fit, m, by_velocity, exact)
@@ -691,17 +688,17 @@ class StreamingEstimator:
 
 def _per_joint(fit: tuple[np.ndarray, ...], m: int, by_velocity: np.ndarray, exact: bool) -> tuple[np.ndarray, ...]:
     """A fit's columns (value, first and second derivative, the acceleration's standard deviation, and
-    any more, such as whether it strained) as the group's m joints' position, velocity, acceleration
-    and the rest. The columns are one per joint (its velocities where ``exact`` and it is fitted on
-    them, else its positions), then, where not ``exact``, one per joint fitted on its velocities
-    (``by_velocity``)."""
+    any more, such as whether it strained; each (..., columns)) as the group's m joints' position,
+    velocity, acceleration and the rest (..., m). The columns are one per joint (its velocities where
+    ``exact`` and it is fitted on them, else its positions), then, where not ``exact``, one per joint
+    fitted on its velocities (``by_velocity``)."""
     value, first, second, *rest = fit
     if exact and by_velocity.any():
         return (value, np.where(by_velocity, value, first), np.where(by_velocity, first, second), *rest)
-    position, velocity, acceleration = value[:m], first[:m].copy(), second[:m].copy()
-    own = [entry[:m].copy() for entry in rest]
+    position, velocity, acceleration = value[..., :m], first[..., :m].copy(), second[..., :m].copy()
+    own = [entry[..., :m].copy() for entry in rest]
     if by_velocity.any():
-        velocity[by_velocity], acceleration[by_velocity] = value[m:], first[m:]
+        velocity[..., by_velocity], acceleration[..., by_velocity] = value[..., m:], first[..., m:]
         for entry, whole in zip(own, rest, strict=True):
-            entry[by_velocity] = whole[m:]
+            entry[..., by_velocity] = whole[..., m:]
     return (position, velocity, acceleration, *own)
