@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from neforward_ros.estimation import repeats
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.repeats import MOST_REPEATS, repeated
 from neforward_ros.estimation.settings import StreamSettings
@@ -217,3 +218,70 @@ def test_a_stop_in_one_joint_group_while_another_moves_on_is_estimated_as_the_wh
     assert np.count_nonzero(near) > 500
     streamed = np.array([got[k] for k in keys])
     np.testing.assert_allclose(streamed[near], whole[near, 0], rtol=0, atol=1e-8 * np.abs(whole).max())
+
+
+def start_error(rate: float, settings: StreamSettings, seed: int) -> float:
+    """The largest q'' error over a minimum-jerk move's start from rest (16-bit readings) whose third
+    changed reading the driver repeats, relative to the move's largest q'' (the repeat's own stamp
+    left out)."""
+    rng = np.random.default_rng(seed)
+    count = int(2.0 * rate)
+    t = (np.arange(count) + rng.uniform(-0.05, 0.05, count)) / rate
+    s = np.clip((t - 0.6) / 0.5, 0.0, 1.0)
+    amplitude = np.array([[1.2, -0.8, 0.5]])
+    step = 2 * np.pi / 2**16
+    q = np.round((10 * s**3 - 15 * s**4 + 6 * s**5)[:, None] * amplitude / step) * step
+    qdd = ((60 * s - 180 * s**2 + 120 * s**3) / 0.25 * ((t > 0.6) & (t < 1.1)))[:, None] * amplitude
+    changed = np.flatnonzero(np.any(q[1:] != q[:-1], axis=1)) + 1
+    repeat = changed[1] + 1  # after two changes, the second the larger: the joints speed up
+    q[repeat] = q[repeat - 1]
+    rows, estimates = stream(t, q, settings)
+    near = (rows != repeat) & (t[rows] > 0.55) & (t[rows] < 0.9)
+    assert np.count_nonzero(near) > 0.3 * rate
+    return float(np.abs(estimates[near] - qdd[rows][near]).max() / np.abs(qdd).max())
+
+
+@pytest.mark.parametrize(
+    ("settings", "most"),
+    [(StreamSettings(method="kalman"), 0.15), (StreamSettings(method="kalman", mode="causal"), 0.5)],
+)
+def test_a_repeat_at_a_move_s_start_is_left_out(settings: StreamSettings, most: float) -> None:
+    """A repeat right after a move's first two changes (a joint speeding up: its readings cannot stand
+    still) is a driver's repeat, not a stop: 5-6 % (Kalman 20 ms) and 24-27 % (causal) of the move's
+    largest q'' at 100 and 200 Hz; read as a stop (as before), 77-80 % and 13-15x at 100 Hz."""
+    for rate in (100.0, 200.0):
+        for seed in (0, 1):
+            error = start_error(rate, settings, seed)
+            assert np.isfinite(error) and error <= most, (rate, seed, settings.mode, error)
+
+
+def test_the_start_test_fails_without_the_speeding_up_rule(monkeypatch) -> None:
+    """The planted bug, kept as a test: steady changes alone (the rule before) fail the test above."""
+    monkeypatch.setattr(repeats, "SPEEDING_UP", 1e300)
+    with pytest.raises(AssertionError):
+        test_a_repeat_at_a_move_s_start_is_left_out(StreamSettings(method="kalman"), 0.15)
+
+
+@pytest.mark.parametrize("speed", [0.55, 0.7, 0.9])
+def test_a_quantised_joint_slower_than_a_step_a_sample_is_never_speeding_up(speed: float) -> None:
+    """Its readings change by one encoder step at a time (their differences on the grid differ only in
+    their last bits): the speeding-up clause leaves none of its equal readings out beyond what the
+    steady-change clause does, on a ramp and a slow sine."""
+    step = 2 * np.pi / 2**16
+    t = np.arange(3000) / 1000.0
+    for exact in (speed * step * 1000.0 * t, speed * step * 1000.0 / (2 * np.pi * 0.3) * np.sin(2 * np.pi * 0.3 * t)):
+        q = np.full((len(t), 3), 0.25)  # the other joints at rest
+        q[:, 0] = np.round((0.7 + exact) / step) * step
+        with_rule = repeated(q)
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(repeats, "SPEEDING_UP", 1e300)
+            without = repeated(q)
+        np.testing.assert_array_equal(with_rule, without)
+
+
+def test_the_quantised_test_fails_when_any_larger_change_speeds_up(monkeypatch) -> None:
+    """The planted bug, kept as a test: a bare comparison of the two changes (no margin) takes the
+    grid's last bits for speeding up and leaves out a slow joint's genuine equal readings."""
+    monkeypatch.setattr(repeats, "SPEEDING_UP", 1.0)
+    with pytest.raises(AssertionError):
+        test_a_quantised_joint_slower_than_a_step_a_sample_is_never_speeding_up(0.7)
