@@ -295,7 +295,7 @@ def window_sums(
     """Each row's window sums over the rows stamped in (s - span_ns, s]: of ``values`` (M, ...) (0
     where not counted) and of ``counted`` (M, ...) (1 where counted, 0 elsewhere), as differences of
     running sums; where a difference would lose the window's sum to rounding (a still joint's tiny
-    values after a fast move's), summed directly, as :class:`RunningWindow` sums every window.
+    values after a fast move's), summed directly, as the node sums every window (:class:`StampedRows`).
 
     Args:
         stamps_ns: (M,), integer ns, increasing.
@@ -327,63 +327,64 @@ def window_sums(
     return total, count
 
 
-class RunningWindow:
-    """:func:`window_sums` one row at a time, in stamp order (each window summed directly; the
-    whole-recording function's differences of running sums agree to about 1e-12)."""
+class StampedRows:
+    """The rows stamped within the last ``span_ns``, in stamp order, kept as one contiguous array of
+    rows of ``shape`` (:attr:`window`): the node's pools (:class:`DeviationPool`, the default's
+    :class:`~.degree_choice.DegreePool`), whose sums over it the whole-recording functions make from
+    differences of running sums (:func:`window_sums`) or sliding ones."""
 
     def __init__(self, span_ns: int, shape: tuple[int, ...]) -> None:
         self._span_ns = span_ns
         self._stamps = np.zeros(64, dtype=np.int64)
-        self._values = np.zeros((64, *shape))
-        self._counted = np.zeros((64, *shape))
+        self._rows = np.zeros((64, *shape))
         self._first = self._end = 0
 
     def clear(self) -> None:
         """Forget every row (a new stream)."""
         self._first = self._end = 0
 
-    def append(self, stamp_ns: int, values: np.ndarray, counted: np.ndarray) -> None:
-        """A row at ``stamp_ns`` (after every earlier row)."""
+    def append(self, stamp_ns: int) -> None:
+        """A row of zeros at ``stamp_ns`` (after every earlier row), the rows stamped at or before
+        ``stamp_ns - span_ns`` forgotten."""
         if self._end == len(self._stamps):  # full: the window's rows moved to the front, room doubled
-            keep = slice(self._first, self._end)
-            size = max(len(self._stamps), 2 * (self._end - self._first))
-            for name in ("_stamps", "_values", "_counted"):
+            kept = self._end - self._first
+            size = max(len(self._stamps), 2 * kept)
+            for name in ("_stamps", "_rows"):
                 old = getattr(self, name)
                 new = np.zeros((size, *old.shape[1:]), dtype=old.dtype)
-                new[: self._end - self._first] = old[keep]
+                new[:kept] = old[self._first : self._end]
                 setattr(self, name, new)
-            self._first, self._end = 0, self._end - self._first
-        self._stamps[self._end], self._values[self._end], self._counted[self._end] = stamp_ns, values, counted
+            self._first, self._end = 0, kept
+        self._first += int(np.searchsorted(self._stamps[self._first : self._end], stamp_ns - self._span_ns, "right"))
+        self._stamps[self._end] = stamp_ns
+        self._rows[self._end] = 0.0
         self._end += 1
 
-    def sums(self, stamp_ns: int) -> tuple[np.ndarray, np.ndarray]:
-        """The sums of values and counts (shape) over the rows stamped in (stamp_ns - span, stamp_ns]
-        (``stamp_ns`` at least the last row's; the rows before the window are forgotten)."""
-        self._first += int(np.searchsorted(self._stamps[self._first : self._end], stamp_ns - self._span_ns, "right"))
-        window = slice(self._first, self._end)
-        return np.add.reduce(self._values[window], axis=0), np.add.reduce(self._counted[window], axis=0)
-
-    def add(self, stamp_ns: int, values: np.ndarray, counted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`append`, then the :meth:`sums` at that row."""
-        self.append(stamp_ns, values, counted)
-        return self.sums(stamp_ns)
+    @property
+    def window(self) -> np.ndarray:
+        """The rows kept (rows, *shape), the newest last: a view, to be written in place."""
+        return self._rows[self._first : self._end]
 
 
 class DeviationPool:
-    """:func:`pooled_std` one estimate at a time, in stamp order: the node's."""
+    """:func:`pooled_std` one estimate at a time, in stamp order: the node's (each window summed
+    directly; the whole-recording function's differences of running sums agree to about 1e-12)."""
 
     def __init__(self, window: float, joints: int) -> None:
-        self._window = RunningWindow(_half_window_ns(window), (joints,))
+        self._rows = StampedRows(_half_window_ns(window), (2, joints))  # squares, whether counted
 
     def clear(self) -> None:
         """Forget every estimate (a new stream)."""
-        self._window.clear()
+        self._rows.clear()
 
     def state(self, stamp_ns: int, std: np.ndarray) -> np.ndarray:
         """The deviations (n,) to state with the estimate at ``stamp_ns`` (after every earlier one)
         whose own are ``std`` (n,)."""
         squares, counted = _squares(np.asarray(std, dtype=float))
-        total, count = self._window.add(stamp_ns, squares, counted)
+        self._rows.append(stamp_ns)
+        window = self._rows.window
+        window[-1, 0], window[-1, 1] = squares, counted
+        total, count = np.add.reduce(window, axis=0)
         return _pooled(squares, counted, total, count)
 
 

@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 from neforward_ros.estimation import native_fit
-from neforward_ros.estimation.adaptive import GAMMA, window_sums
+from neforward_ros.estimation.adaptive import GAMMA, StampedRows, window_sums
 from neforward_ros.stamps import NS
 
 DEGREES = (6, 4, 2)
@@ -121,36 +121,21 @@ class DegreePool:
     :func:`~.native_fit.choose_last`; the whole recording's sliding sums agree to about 1e-12)."""
 
     def __init__(self, joints: int) -> None:
-        self._span_ns = round(MEMORY * NS)
-        self._stamps = np.zeros(64, dtype=np.int64)
-        self._scores = np.zeros((64, len(DEGREES) + 1, joints))  # each degree's terms, then whether counted
+        # the last second's estimates: each degree's score terms, then whether counted
+        self._rows = StampedRows(round(MEMORY * NS), (len(DEGREES) + 1, joints))
         self._accelerations = np.zeros((len(DEGREES), joints))  # the estimate begun's
         self._stated = np.zeros((len(DEGREES), joints))
         self._counted = np.zeros(joints, dtype=np.uint8)
-        self._first = self._end = 0
 
     def clear(self) -> None:
         """Forget every estimate (a new stream)."""
-        self._first = self._end = 0
+        self._rows.clear()
 
     def start(self, stamp_ns: int) -> None:
         """Begin the estimate at ``stamp_ns`` (after every earlier one); the estimates a second older
         are forgotten."""
-        if self._end == len(self._stamps):  # full: the window's rows moved to the front, room doubled
-            keep = slice(self._first, self._end)
-            size = max(len(self._stamps), 2 * (self._end - self._first))
-            for name in ("_stamps", "_scores"):
-                old = getattr(self, name)
-                new = np.zeros((size, *old.shape[1:]), dtype=old.dtype)
-                new[: self._end - self._first] = old[keep]
-                setattr(self, name, new)
-            self._first, self._end = 0, self._end - self._first
-        stamps = self._stamps[self._first : self._end]
-        self._first += int(np.searchsorted(stamps, stamp_ns - self._span_ns, "right"))
-        self._stamps[self._end] = stamp_ns
-        self._scores[self._end] = 0.0
+        self._rows.append(stamp_ns)
         self._counted[:] = 0
-        self._end += 1
 
     def choose(
         self, joints: np.ndarray, accelerations: np.ndarray, stated: np.ndarray
@@ -160,7 +145,7 @@ class DegreePool:
         standard deviation to state with the chosen degree's estimate (m,) (:func:`chosen_std`)."""
         self._accelerations[:, joints], self._stated[:, joints] = accelerations, stated
         self._counted[joints] = 1
-        window = self._scores[self._first : self._end]
+        window = self._rows.window
         library = native_fit.FIT.get()
         if library is not None:
             chosen, std = native_fit.choose_last(

@@ -269,21 +269,21 @@ static int fit_target(long count, const double *times, const double *values, lon
     if (valid == 0) return 1;
     if (lower == 0) valid_low = 0;
     long width = hi[0] - lo[0], rings = valid > valid_low ? valid : valid_low;
-    also_at[0] = 0;  /* each further degree's level fits, one after another */
+    also_at[0] = 0;  /* where each further degree's level fits start in fits_also */
     for (long a = 0; a < nalso; a++) {
         if (valid_also[a] > rings) rings = valid_also[a];
         also_at[a + 1] = also_at[a] + valid_also[a];
     }
-    double *fits_also = nalso > 0 ? malloc(sizeof(double) * 5 * (size_t)also_at[nalso] * (size_t)n) : NULL;
-    if (nalso > 0 && fits_also == NULL) return 2;
     double *scratch = malloc(sizeof(double) * (d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n
-                                               + (size_t)rings * n + 2 * (size_t)n + (size_t)width * n));
-    if (scratch == NULL) { free(fits_also); return 2; }
+                                               + (size_t)rings * n + 2 * (size_t)n + (size_t)width * n
+                                               + 5 * (size_t)also_at[nalso] * n));
+    if (scratch == NULL) return 2;
     double *moments = scratch, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
     double *out_low = fits_low + 5 * (size_t)valid_low * n;
     double *white = out_low + 5 * (size_t)n, *step = white + n, *spread = step + n;
     double *changes = spread + 4 * n;  /* after previous, candidate, alive: (rings, n) */
     double *noise = changes + (size_t)rings * n, *noise_low = noise + n, *changed = noise_low + n;
+    double *fits_also = changed + (size_t)width * n;  /* each further degree's level fits, one after another */
     /* each level's changes between consecutive samples (changes_within), from the changes up to each
        sample of the largest window, which holds the others (width, n), every column at once */
     for (long j = 0; j < n; j++) changed[j] = 0.0;
@@ -408,7 +408,6 @@ static int fit_target(long count, const double *times, const double *values, lon
                    gamma, roughness, floor_, out + (a + 1) * 5 * n, noise_low);
     }
     free(scratch);
-    free(fits_also);
     return status;
 }
 
@@ -848,7 +847,7 @@ def choose_degrees(
     stamps = np.ascontiguousarray(stamps_ns, dtype=np.int64)
     mask = np.ascontiguousarray(counted, dtype=np.uint8)
     degrees, m, n = accelerations.shape
-    chosen = np.empty((m, n), dtype=_longs(np.zeros(0)).dtype)
+    chosen = np.empty((m, n), dtype=C_LONG)
     out = np.empty((m, n))
     library.choose_degrees(m, degrees, n, stamps.ctypes.data, int(span_ns), accelerations.ctypes.data,
                            accelerations.strides[0] // item, accelerations.strides[1] // item, stated.ctypes.data,
@@ -874,7 +873,7 @@ def choose_last(
     rows, degrees, n = scores.shape[0], scores.shape[1] - 1, scores.shape[2]
     accelerations = np.ascontiguousarray(accelerations, dtype=float)
     stated = np.ascontiguousarray(stated, dtype=float)
-    chosen = np.zeros(n, dtype=_longs(np.zeros(0)).dtype)
+    chosen = np.zeros(n, dtype=C_LONG)
     out = np.full(n, np.nan)  # an empty window (none begun) states nothing
     library.choose_last(rows, degrees, n, scores.ctypes.data, accelerations.ctypes.data, stated.ctypes.data,
                         counted.ctypes.data, least, gamma, chosen.ctypes.data, out.ctypes.data)  # fmt: skip
@@ -891,7 +890,10 @@ PARALLEL_TARGETS = 20_000
 """From this many targets on (a whole recording, not a message), :func:`fits` uses every core."""
 
 
+C_LONG = np.int64 if ctypes.sizeof(ctypes.c_long) == 8 else np.int32
+"""numpy's type of a C long."""
+
+
 def _longs(values: np.ndarray) -> np.ndarray:
     """As C longs, contiguous."""
-    kind = np.int64 if ctypes.sizeof(ctypes.c_long) == 8 else np.int32
-    return np.ascontiguousarray(values, dtype=kind)
+    return np.ascontiguousarray(values, dtype=C_LONG)
