@@ -43,6 +43,7 @@ bench: $(VENV)/.installed-test $(if $(HAVE_ROS),$(ROS_VENV)/.installed)
 	$(BIN)/python bench/bench_stream.py
 	$(BIN)/python bench/bench_estimators.py
 	$(BIN)/python bench/bench_estimator_family.py --plot docs/estimators.png
+	$(BIN)/python bench/bench_estimator_unseen.py
 	$(BIN)/python bench/bench_transients.py
 	$(BIN)/python bench/bench_kalman.py
 	$(BIN)/python bench/bench_causal_cost.py

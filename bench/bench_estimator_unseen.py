@@ -1,0 +1,73 @@
+"""The estimator settings on motions the family bench does not use: a check against over-fitting it.
+
+``bench_estimator_family.py`` is the family the settings were measured on while they were built. The
+same measurement here runs on 90 other cases: seeds 7 and 31 (the family uses 100), minimum-jerk
+and trapezoidal moves, gaits, 0.5 Hz and 3 Hz sines, at 100, 250 and 800 Hz (the family: 100, 500
+and 1000), through 12 bits, 16 bits with 6 % of the samples repeated under a new stamp, and 14 bits
+with 10 % repeated. Per case and setting: q-ddot's relative RMS error over the fresh samples (the
+repeats' stamps left out, as hindsight knows them) and its ratio to hindsight for the setting's
+delay; then each setting's median and worst ratio and its share of cases within the target (1.5).
+
+Usage: python bench/bench_estimator_unseen.py [--only default,kalman 20ms,kalman causal,polyfit causal]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_estimator_family import SETTINGS, SHORT, TARGET, run
+from hindsight import best, relative_rms
+from motion_family import make, repeated
+
+SEEDS = (7, 31)
+KINDS = ("minjerk", "trapezoid", "gait", "sines0.5", "sines3")
+RATES = (100, 250, 800)
+ENCODERS = ((12, 0.0), (16, 0.06), (14, 0.1))
+"""(bits, share of repeated samples)."""
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    documented = ["default", "kalman 20ms", "kalman causal", "polyfit causal"]
+    parser.add_argument("--only", default=",".join(documented), help=f"comma-separated among: {', '.join(SHORT)}")
+    args = parser.parse_args()
+    wanted = args.only.split(",")
+    unknown = sorted(set(wanted) - set(SHORT))
+    if unknown:
+        parser.error(f"unknown settings {unknown}; choose among {SHORT}")
+    chosen = [(short, settings) for short, settings in zip(SHORT, SETTINGS.values(), strict=True) if short in wanted]
+    print(f"{'motion':<10}{'rate':>5}{'bits':>5}{'rep':>5}{'seed':>5}  " + "".join(f"{s:>20}" for s, _ in chosen))
+    ratios: dict[str, list[float]] = {short: [] for short, _ in chosen}
+    for seed in SEEDS:
+        for kind in KINDS:
+            for rate in RATES:
+                for bits, share in ENCODERS:
+                    t, q, _, qdd = make(kind, float(rate), bits, seed, 4.0, repeats=share)
+                    fresh = np.flatnonzero(~repeated(seed, len(t), share))
+                    inside = fresh[(t[fresh] > 1.0) & (t[fresh] < t[-1] - 0.5)]
+                    row = ""
+                    for short, settings in chosen:
+                        delay = round(settings.effective_lag, 6)
+                        reference, _ = best(t[fresh], q[fresh], qdd[fresh], np.searchsorted(fresh, inside), delay)
+                        index, estimates, _, _ = run(t, q, settings)
+                        at = np.minimum(np.searchsorted(index, inside), len(index) - 1)
+                        made = index[at] == inside
+                        values = np.where(made[:, None], estimates[at], np.nan)
+                        error = relative_rms(values, qdd[inside])
+                        ratios[short].append(error / reference)
+                        row += f"{100 * error:>11.2f}%{error / reference:>7.2f}x "
+                    print(f"{kind:<10}{rate:>5}{bits:>5}{share:>5.2f}{seed:>5}  {row}", flush=True)
+    print()
+    for short, values in ratios.items():
+        found = np.array(values)
+        print(f"{short}: ratio to hindsight median {np.median(found):.2f}, worst {found.max():.2f}; "
+              f"within {TARGET}: {np.mean(found <= TARGET):.0%} of {len(found)} cases")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
