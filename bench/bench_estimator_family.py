@@ -74,6 +74,23 @@ def run(t: np.ndarray, q: np.ndarray, settings: StreamSettings) -> tuple[np.ndar
     return index, np.array([out[s][0] for s in keys]), np.array([out[s][1] for s in keys]), cost
 
 
+def refuse_unknown(parser: argparse.ArgumentParser, wanted: list[str]) -> None:
+    """Stop with the parser's error where a name of ``wanted`` is no setting's short name."""
+    unknown = sorted(set(wanted) - set(SHORT))
+    if unknown:
+        parser.error(f"unknown settings {unknown}; choose among {SHORT}")
+
+
+def at_samples(index: np.ndarray, rows: np.ndarray, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rows at the sample indices ``samples`` (len(samples), n), NaN where ``run`` gave none; whether
+    it gave one), from ``run``'s sample indices and rows."""
+    at = np.searchsorted(index, samples)
+    found = (at < len(index)) & (index[np.minimum(at, len(index) - 1)] == samples)
+    values = np.full((len(samples), rows.shape[1]), np.nan)
+    values[found] = rows[at[found]]
+    return values, found
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=4.0)
@@ -83,9 +100,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.only:
         wanted = args.only.split(",")
-        unknown = sorted(set(wanted) - set(SHORT))
-        if unknown:
-            parser.error(f"unknown settings {unknown}; choose among {SHORT}")
+        refuse_unknown(parser, wanted)
         for name, short in list(zip(SETTINGS, SHORT, strict=True)):
             if short not in wanted:
                 del SETTINGS[name]
@@ -114,12 +129,8 @@ def main() -> None:
                     if delay not in references:
                         references[delay] = best(t[fresh], q[fresh], qdd[fresh], in_fresh, delay)[0]
                     index, estimate, std, cost = run(t, q, settings)
-                    at = np.searchsorted(index, evaluated)
-                    found = (at < len(index)) & (index[np.minimum(at, len(index) - 1)] == evaluated)
-                    values = np.full((len(evaluated), q.shape[1]), np.nan)
-                    values[found] = estimate[at[found]]
-                    stds = np.full(values.shape, np.nan)
-                    stds[found] = std[at[found]]
+                    values, found = at_samples(index, estimate, evaluated)
+                    stds, _ = at_samples(index, std, evaluated)
                     z = (values - qdd[evaluated]) / stds
                     honesty[name].append(float(np.sqrt(np.nanmean(z**2))) if np.isfinite(z).any() else np.nan)
                     e = relative_rms(values, qdd[evaluated]) if found.any() else np.inf

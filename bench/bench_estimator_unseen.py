@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_estimator_family import SETTINGS, SHORT, TARGET, run
+from bench_estimator_family import SETTINGS, SHORT, TARGET, at_samples, refuse_unknown, run
 from hindsight import best, relative_rms
 from motion_family import make, repeated
 
@@ -37,9 +37,7 @@ def main() -> None:
     parser.add_argument("--only", default=",".join(documented), help=f"comma-separated among: {', '.join(SHORT)}")
     args = parser.parse_args()
     wanted = args.only.split(",")
-    unknown = sorted(set(wanted) - set(SHORT))
-    if unknown:
-        parser.error(f"unknown settings {unknown}; choose among {SHORT}")
+    refuse_unknown(parser, wanted)
     chosen = [(short, settings) for short, settings in zip(SHORT, SETTINGS.values(), strict=True) if short in wanted]
     print(f"{'motion':<10}{'rate':>5}{'bits':>5}{'rep':>5}{'seed':>5}  " + "".join(f"{s:>20}" for s, _ in chosen))
     ratios: dict[str, list[float]] = {short: [] for short, _ in chosen}
@@ -51,13 +49,15 @@ def main() -> None:
                     fresh = np.flatnonzero(~repeated(seed, len(t), share))
                     inside = fresh[(t[fresh] > 1.0) & (t[fresh] < t[-1] - 0.5)]
                     row = ""
+                    references: dict[float, float] = {}  # per delay: the causal settings share one
                     for short, settings in chosen:
                         delay = round(settings.effective_lag, 6)
-                        reference, _ = best(t[fresh], q[fresh], qdd[fresh], np.searchsorted(fresh, inside), delay)
+                        if delay not in references:
+                            in_fresh = np.searchsorted(fresh, inside)
+                            references[delay] = best(t[fresh], q[fresh], qdd[fresh], in_fresh, delay)[0]
+                        reference = references[delay]
                         index, estimates, _, _ = run(t, q, settings)
-                        at = np.minimum(np.searchsorted(index, inside), len(index) - 1)
-                        made = index[at] == inside
-                        values = np.where(made[:, None], estimates[at], np.nan)
+                        values, _ = at_samples(index, estimates, inside)
                         error = relative_rms(values, qdd[inside])
                         ratios[short].append(error / reference)
                         row += f"{100 * error:>11.2f}%{error / reference:>7.2f}x "
