@@ -212,8 +212,8 @@ class KalmanBank:
         return errors
 
     def weights(self) -> np.ndarray:
-        """(models, joints): each model's weight per joint, 1 for the best-scored model and 0 for the
-        others (worked out once per sample)."""
+        """(models, joints): each model's weight per joint by the likelihood, exp(score) normalised
+        (worked out once per sample)."""
         assert self.scores is not None
         if self._weights is None:
             weights = np.exp(self.scores - self.scores.max(axis=0, keepdims=True))
@@ -223,10 +223,9 @@ class KalmanBank:
     def _shares(self) -> np.ndarray:
         """Causal, once the predictions :data:`HORIZON` ahead have been scored for :data:`MEMORY` since the
         start (from :data:`SETTLE` after it, and after a silence; until then the likelihood's weights
-        serve): each
-        model's share of a joint's estimate (models, joints), the likelihood of its errors taken as
-        Gaussian of its own mean square, MEMORY / HORIZON independent ones in the record, relative to
-        the best's: (least / its) ** (MEMORY / HORIZON / 2), normalised. Nearly the best model alone
+        serve): each model's share of a joint's estimate (models, joints), the likelihood of its errors
+        taken as Gaussian of its own mean square, MEMORY / HORIZON independent ones in the record,
+        relative to the best's: (least / its) ** (MEMORY / HORIZON / 2), normalised. Nearly the best model alone
         (one twice the least weighs a thousandth), but as a move starts after a dwell and the slow
         model that the dwell chose lags, the weight goes over to a faster one as its errors show,
         where taking the least's alone jumps between the two (16.8 rad/s^2 off, against 5.9, on a
