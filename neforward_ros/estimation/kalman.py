@@ -103,7 +103,7 @@ class KalmanTrack:
             inverse = np.linalg.inv(innovation_covariance)  # (models, 2, 2)
             gain = (inverse @ projected).transpose(0, 2, 1)  # (models, dim, 2)
             innovation = np.stack([positions, velocities]) - rows @ state  # (models, 2, m)
-            if smoothed is not None and not first:
+            if smoothed is not None:
                 smoothed.measure(rows, inverse, projected, innovation)
             state = state + gain @ innovation
             covariance = covariance - gain @ projected
@@ -119,7 +119,7 @@ class KalmanTrack:
             variance = (np.maximum(projected[:, 0] + projected[:, 3], 0.0) + self._noise)[:, None]  # (models, 1)
             gain = projected / variance
             innovation = positions - state[:, 0] - state[:, 3]  # (models, m)
-            if smoothed is not None and not first:
+            if smoothed is not None:
                 rows = models.measured_rows[:, :1]
                 smoothed.measure(rows, 1.0 / variance[:, :, None], projected[:, None, :], innovation[:, None, :])
             state = state + gain[:, :, None] * innovation[:, None, :]
@@ -165,13 +165,15 @@ class KalmanTrack:
         """Where the target is the stamp of a step older than the newest and smoothing is on: each
         model's filtered acceleration there (models, m) and its variance (models,), what the step said
         before the later samples revised it; else None."""
+        if self._smoothed is None:
+            return None
         steps = self.steps
         index = self._index(target)
-        if self._smoothed is None or index == len(steps) - 1 or steps[index].stamp != target:
+        if index == len(steps) - 1 or steps[index].stamp != target:
             return None
-        row = self.models.readout[:, 2:3]  # (models, 1, dim)
+        row = self.models.readout[:, 2]  # (models, dim)
         step = steps[index]
-        return (row @ step.filtered)[:, 0], (row @ step.covariance @ row.transpose(0, 2, 1))[:, 0, 0]
+        return np.einsum("md,mdj->mj", row, step.filtered), _acceleration_variance(row, step.covariance)
 
     def acceleration_variance(self, target: int) -> np.ndarray:
         """Each model's variance of the acceleration :meth:`estimate` gives at the target (models,), the
@@ -192,8 +194,7 @@ class KalmanTrack:
         if target > stamp:
             transition, noise, transposed = self.models.transition(interval(target, stamp))
             covariance = transition @ covariance @ transposed + noise
-        row = self.models.readout[:, 2:3]  # (models, 1, dim)
-        return (row @ covariance @ row.transpose(0, 2, 1))[:, 0, 0]
+        return _acceleration_variance(self.models.readout[:, 2], covariance)
 
     def forget_before(self, stamp: int) -> None:
         """Drop the steps no later estimate needs: all before the newest step at or before ``stamp``."""
@@ -213,6 +214,12 @@ class KalmanTrack:
             track.steps.append(_Step(step.stamp, step.filtered[:, :, columns], step.covariance))
         track._smoothed = None if self._smoothed is None else self._smoothed.select(columns)
         return track
+
+
+def _acceleration_variance(row: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+    """Each model's variance (models,) of the acceleration read by ``row`` (models, dim) from a state of
+    ``covariance`` (models, dim, dim)."""
+    return np.einsum("md,mde,me->m", row, covariance, row)
 
 
 class _Smoothed:
@@ -250,9 +257,8 @@ class _Smoothed:
         self.cross[:, live] -= (weights @ projected).reshape(models, -1, dim, dim)
         kept = self.end - live.start
         told = told.reshape(models, kept, dim, -1)
-        weights = weights.reshape(models, kept, dim, -1)
         acceleration = np.einsum("md,mkdp->mkp", self.row, told)  # r C_k H^T (models, kept, p)
-        self.variances[:, live] -= np.einsum("mkp,mkp->mk", acceleration, np.einsum("md,mkdp->mkp", self.row, weights))
+        self.variances[:, live] -= np.add.reduce(acceleration * (acceleration @ inverse), axis=2)
 
     def append(self, state: np.ndarray, covariance: np.ndarray) -> None:
         """A new newest step: its filtered state and covariance."""
@@ -268,7 +274,7 @@ class _Smoothed:
             self.start, self.end = 0, kept
         self.means[:, self.end] = state
         self.cross[:, self.end] = covariance
-        self.variances[:, self.end] = np.einsum("md,mde,me->m", self.row, covariance, self.row)
+        self.variances[:, self.end] = _acceleration_variance(self.row, covariance)
         self.end += 1
 
     def mean(self, index: int) -> np.ndarray:

@@ -247,9 +247,10 @@ class KalmanBank:
         at = self._model_of(target)
         estimates = self.track.estimate(at)  # (M, 3, m)
         variances = self.track.acceleration_variance(at)[:, None]  # (M, 1)
-        weights = self.weights() if len(estimates) > 1 else np.ones((1, estimates.shape[2]))
-        if self._choosing and len(estimates) > 1:
-            weights = self._shares()
+        if len(estimates) == 1:
+            weights = np.ones((1, estimates.shape[2]))
+        else:
+            weights = self._shares() if self._choosing else self.weights()
         mixture = np.add.reduce(weights[:, None, :] * estimates, axis=0)
         spread = estimates[:, 2] - mixture[2]
         variance = np.add.reduce(weights * (variances + spread * spread), axis=0)
