@@ -290,3 +290,47 @@ def test_the_quantised_test_fails_when_any_larger_change_speeds_up(monkeypatch) 
     monkeypatch.setattr(repeats, "SPEEDING_UP", 1.0)
     with pytest.raises(AssertionError):
         test_a_quantised_joint_slower_than_a_step_a_sample_is_never_speeding_up(0.7)
+
+
+def creeping_stop(rate: float, equal: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, q, qdd): joint b creeps one 12-bit encoder step a sample into its stop (as a move's end at
+    100 Hz reads), the other two at rest; ``equal`` samples later joint a starts a sine-shaped move."""
+    step = 2 * np.pi / 2**12
+    count = int(3 * rate)
+    t = np.arange(count) / rate
+    q = np.full((count, 3), 0.4)
+    stop = count // 2
+    q[:, 1] = 0.4 + step * np.minimum(np.arange(count), stop)
+    start = stop + equal + 1
+    s = t[start:] - t[start - 1]
+    q[start:, 0] += 0.3 * (1.0 - np.cos(2 * np.pi * s))
+    qdd = np.zeros_like(q)
+    qdd[start:, 0] = 0.3 * (2 * np.pi) ** 2 * np.cos(2 * np.pi * s)
+    return t, q, qdd
+
+
+@pytest.mark.parametrize("equal", [2, 5, 7])
+@pytest.mark.parametrize("settings", [StreamSettings(), StreamSettings(method="kalman"), StreamSettings(mode="causal")])
+def test_a_joint_creeping_into_its_stop_is_no_driver_s_repeat(equal: int, settings: StreamSettings) -> None:
+    """A joint that moved one encoder step at every sample, then reads alike a few times while the
+    others rest, looks like a driver's repeats, until the sample that ends the run leaves it where it
+    was: it stopped. The run is taken back: the node and the whole recording leave nothing out, and
+    every stamp gets a finite estimate (with the run left out, its hole of 30-80 ms at 100 Hz left the
+    default setting with no estimate for 0.2 s, every joint's)."""
+    t, q, _ = creeping_stop(100.0, equal)
+    assert not repeated(q).any()
+    rows, estimates = stream(t, q, settings)
+    inner = (t[rows] > 0.5) & (t[rows] < t[-1] - 0.5)
+    assert np.count_nonzero(inner) >= len(t) - 100 - 2
+    assert np.isfinite(estimates[inner]).all(), settings
+
+
+def test_the_creeping_stop_test_fails_when_its_run_stays_repeats(monkeypatch) -> None:
+    """The planted bug, kept as a test: with a run ended by a changed sample always kept as repeats (the
+    rule before), the test above must fail."""
+    from neforward_ros.estimation import history
+
+    monkeypatch.setattr(repeats, "stopped", lambda kept, following: False)
+    monkeypatch.setattr(history, "stopped", lambda kept, following: False)
+    with pytest.raises(AssertionError):
+        test_a_joint_creeping_into_its_stop_is_no_driver_s_repeat(5, StreamSettings())

@@ -7,7 +7,7 @@ from collections import deque
 import numpy as np
 
 from neforward_ros.estimation.kalman_bank import KalmanBank
-from neforward_ros.estimation.repeats import MOST_REPEATS, MOVING_STEPS, moving
+from neforward_ros.estimation.repeats import MOST_REPEATS, MOVING_STEPS, moving, stopped
 from neforward_ros.stamps import NS
 
 
@@ -127,10 +127,14 @@ class JointHistory:
     def append(
         self, stamp_ns: int, positions: list[float], velocities: list[float], efforts: list[float], max_hole_ns: int
     ) -> None:
-        """A new sample, newest of all. After a run of :data:`MOST_REPEATS` left-out samples (a stop,
-        not a driver's repeats) those samples are taken back first, in order."""
+        """A new sample, newest of all. After a run of left-out samples that was a stop, not a driver's
+        repeats (:data:`MOST_REPEATS` of them, or a moving joint that the new sample leaves where it
+        was: :func:`~neforward_ros.estimation.repeats.stopped`), those samples are taken back first, in
+        order."""
         run, self.run = self.run, []
-        if len(run) >= MOST_REPEATS:
+        if len(run) >= MOST_REPEATS or (
+            run and stopped(self._positions[self.end - MOVING_STEPS - 1 : self.end], np.asarray(positions))
+        ):
             for sample in run:
                 self._store(*sample, max_hole_ns, received=False)
                 self.left_out.pop()
