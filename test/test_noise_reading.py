@@ -108,6 +108,51 @@ def test_a_slow_motion_through_a_coarse_encoder_keeps_its_noise(compiled: bool) 
     assert np.all(error <= 0.2 * np.sqrt(np.mean(np.square(qdd[inside]), axis=0))), error
 
 
+def sweeping_through_a_step_a_sample(rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, q, qdd): three slow sines through a 12-bit encoder whose speeds sweep through one and two
+    encoder steps a sample at ``rate``, where the rounding error drifts instead of being drawn afresh."""
+    step = 2 * np.pi / 2**12
+    t = np.arange(int(4 * rate)) / rate
+    per_sample = step * rate  # rad/s at one step a sample
+    w = 2 * np.pi * np.array([0.31, 0.37, 0.43])
+    amplitude = per_sample * np.array([1.3, 1.6, 2.4]) / w
+    q = amplitude * np.sin(w * t[:, None] + np.array([0.2, 1.1, 2.5]))
+    return t, np.round(q / step) * step, -amplitude * w**2 * np.sin(w * t[:, None] + np.array([0.2, 1.1, 2.5]))
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+@pytest.mark.parametrize("rate", [600.0, 900.0])
+def test_a_joint_drifting_through_its_rounding_keeps_its_largest_window(compiled: bool, rate: float) -> None:
+    """Where a joint moves a steady number of encoder steps a sample, its rounding error drifts and is
+    drawn afresh only where that number changes: counted as a fresh error at every change of the
+    reading, a small window's stated noise was a third of its spread, its estimate broke the larger
+    windows' intervals now and then, and degree 2's adaptive error was 2.3x that of its largest window
+    alone (6.2x at 900 Hz). Against that window's least-squares parabola (numpy's polyfit, per target): at most
+    1.25x."""
+    if compiled:
+        native_fit.FIT.get(wait=True)
+    fits = adaptive.adaptive_fits if compiled else adaptive.python_adaptive_fits
+    t, q, qdd = sweeping_through_a_step_a_sample(rate)
+    targets = np.arange(int(0.5 * rate), len(t) - int(0.5 * rate), 3)
+    _, _, estimate, _ = fits(t, q, t[targets], 0.1, 2, 0.1)
+    half = round(0.1 * rate)
+    widest = np.array([
+        [2.0 * np.polyfit(t[k - half : k + half + 1] - t[k], q[k - half : k + half + 1, j], 2)[0] for j in range(3)]
+        for k in targets
+    ])  # fmt: skip
+    truth = qdd[targets]
+    adaptive_error = np.sqrt(np.mean(np.square(estimate - truth)))
+    widest_error = np.sqrt(np.mean(np.square(widest - truth)))
+    assert adaptive_error <= 1.25 * widest_error, (adaptive_error, widest_error)
+
+
+def test_the_drift_test_fails_when_every_change_of_the_reading_is_a_fresh_error(monkeypatch) -> None:
+    """The planted bug, kept as a test: without the turns' bound (as before), the test above fails."""
+    monkeypatch.setattr(adaptive, "TURNS", 1e300)
+    with pytest.raises(AssertionError):
+        test_a_joint_drifting_through_its_rounding_keeps_its_largest_window(False, 900.0)
+
+
 @pytest.mark.parametrize("bits", [12, 16, 20])
 def test_a_fast_joint_turning_within_one_step_reads_no_step(bits: int) -> None:
     """A 5 Hz sine at 100 Hz through an encoder: at its turning point two samples can round alike,

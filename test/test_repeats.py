@@ -334,3 +334,38 @@ def test_the_creeping_stop_test_fails_when_its_run_stays_repeats(monkeypatch) ->
     monkeypatch.setattr(history, "stopped", lambda kept, following: False)
     with pytest.raises(AssertionError):
         test_a_joint_creeping_into_its_stop_is_no_driver_s_repeat(5, StreamSettings())
+
+
+def test_a_driver_s_repeat_as_one_joint_stops_and_another_speeds_up_stays_a_repeat() -> None:
+    """Joint a decelerates into its stop (it changed at every step: it makes the samples moving), joint
+    b speeds up with a pause of one interval on the way (so it does not), and the driver repeats one
+    reading. After it, a is unchanged, but b has moved 7 steps after at most 2 an interval: more than
+    one interval allows, so the run held the reading and stays left out, in the node and the whole
+    recording alike. (With the last clause of ``stopped`` gone, it was taken back as a stop: 4.2x
+    hindsight for the causal fit on minimum-jerk moves at 100 Hz with 10 % repeats.)"""
+    step = 2 * np.pi / 2**14
+    a = [-60, -45, -34, -23, -11, -4, -1, 0, 0, 0, 0, 0, 0, 0]
+    b = [-3, -3, -3, -3, -3, -2, -2, 0, 0, 7, 14, 24, 36, 50]
+    q = np.column_stack([a, b, np.zeros(len(a))]) * step + 0.3
+    q = np.vstack([np.tile(q[:1], (6, 1)), q])  # at rest before
+    repeat = 6 + 8  # equal to the sample before it
+    np.testing.assert_array_equal(q[repeat], q[repeat - 1])
+    assert repeated(q)[repeat]
+    estimator = StreamingEstimator(NAMES, settings=StreamSettings())
+    for k in range(len(q)):
+        estimator.update(10**18 + k * 10_000_000, NAMES, q[k].tolist())
+    (group,) = estimator._groups
+    assert list(group.left_out) == [10**18 + repeat * 10_000_000]
+
+
+def test_the_speeding_up_repeat_test_fails_without_the_one_interval_clause(monkeypatch) -> None:
+    """The planted bug, kept as a test: ``stopped`` without its last clause fails the test above."""
+    from neforward_ros.estimation import history
+
+    def without(kept: np.ndarray, following: np.ndarray) -> bool:
+        return bool(np.all((np.asarray(following) == kept[-1])[repeats.moving_joints(kept)]))
+
+    monkeypatch.setattr(repeats, "stopped", without)
+    monkeypatch.setattr(history, "stopped", without)
+    with pytest.raises(AssertionError):
+        test_a_driver_s_repeat_as_one_joint_stops_and_another_speeds_up_stays_a_repeat()

@@ -32,7 +32,9 @@ error is not white: it changes only when the reading changes, so a window of N s
 (changes of the reading + 1) independent errors, and its variance is scaled up by N over that number
 (counted in each window: at a turning point the reading rests on a step for a few samples and changes at
 every sample around them; counting from the speed at the estimate, zero there, took the whole window for
-one error).
+one error). Nor is it drawn afresh where the reading changes by the same number of steps at every
+sample (a joint at about one step a sample drifts through its rounding): the count is also at most
+:data:`TURNS` times the window's changes of that number (:func:`turns_within`).
 
 G, :data:`GAMMA`, is 4: the intervals must not break on noise alone over the thousands of estimates
 a second of a robot's joints gives, and quantisation makes the noise heavier-tailed than a Gaussian.
@@ -99,6 +101,9 @@ float32 even, stays within 0.01 of a step down to 20-bit encoders)."""
 ROUGHNESS = 0.01
 """The noise, relative to the samples' spread in the largest window, above which an estimate strains."""
 _GAIN = math.sqrt(2.0 / math.pi)  # mean |N(0, 1)|
+TURNS = 2.0
+"""A window on an encoder's grid holds at most this many times its turns independent rounding errors
+(:func:`turns_within`; the compiled fit writes the same number)."""
 
 
 def ladder(h_max: float) -> np.ndarray:
@@ -193,6 +198,44 @@ def changes_up_to(y: np.ndarray) -> np.ndarray:
     """(T, n): how many times each column of y (T, n) changes between consecutive samples up to each
     sample (:func:`changes_within` counts a window's from it)."""
     return np.concatenate([np.zeros((1, y.shape[1])), np.cumsum(y[1:] != y[:-1], axis=0)])
+
+
+def turns(y: np.ndarray) -> np.ndarray:
+    """(T - 2, n): how much each column's change between consecutive samples changes at each sample
+    from the third (an encoder's rounding error is drawn afresh where it does: see
+    :func:`turns_within`)."""
+    return np.abs((y[2:] - y[1:-1]) - (y[1:-1] - y[:-2]))
+
+
+def turns_within(turned: np.ndarray, lo: np.ndarray, hi: np.ndarray, step: np.ndarray) -> np.ndarray:
+    """(M, n): how many times the change between consecutive samples changes by half of ``step``
+    (M, n) or more within each window [lo, hi) (M,) of the samples whose :func:`turns` is ``turned``;
+    0 where the step is 0.
+
+    On an encoder's grid, a joint that moves a steady number of steps a sample (a slow sine at about
+    one step a sample, through 12 bits at 800 Hz) keeps its rounding error but for a slow drift: the
+    error is drawn afresh only where the number of steps a sample changes. Counted as a change of
+    the reading, each of those samples was an independent error, and a small window's stated noise
+    was a third of its fits' actual spread; its estimate left the larger windows' intervals and the
+    rule took it (degree 2 on such a sine: 2.3x the error of its largest window alone). A slow
+    drift's wrap shows as two turns; but where the speed sweeps through many steps a sample across
+    the window (a turning point's parabola at 1 kHz through 16 bits) its errors are nearly independent
+    between turns too, and the turns alone overstated the noise there (RMS of error / sigma 0.53 with
+    the changes, 0.46 with the turns): :data:`TURNS` times the turns leaves the parabola's at 0.53 and
+    the slow sine's error at its largest window's (1.3 % and 1.4 % against 3.0 % and 3.1 %, two seeds)."""
+    out = np.zeros(step.shape)
+    longest = int(np.max(hi - lo - 2, initial=0))
+    if longest <= 0 or not len(turned):
+        return out
+    chunk = max(1, GRID_CHUNK // max(longest * step.shape[1], 1))
+    for start in range(0, len(lo), chunk):
+        part = slice(start, start + chunk)
+        index = lo[part, None] + np.arange(longest)
+        inside = index < (hi[part] - 2)[:, None]
+        taken = turned[np.minimum(index, len(turned) - 1)]  # (m, longest, n)
+        counted = inside[..., None] & (taken >= 0.5 * step[part, None, :]) & (step[part, None, :] > 0.0)
+        out[part] = np.count_nonzero(counted, axis=1)
+    return out
 
 
 def changes_within(changed: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -414,7 +457,8 @@ def accel_std(
     """The standard deviation of q'' from a fit: ``variance`` its factor for unit white noise,
     ``count`` samples in the window, ``changes`` how many times the samples change across it (an
     encoder's rounding is drawn afresh only when the reading changes: the window holds changes + 1
-    independent rounding errors), ``position`` the joint's position (the noise is at least
+    independent rounding errors; the callers pass the fewer of those and :data:`TURNS` times its
+    :func:`turns_within`), ``position`` the joint's position (the noise is at least
     :data:`FLOOR` of it: samples without any noise are still rounded, and the fits with them)."""
     quantisation = step**2 / 12.0
     crossings = np.where(step > 0.0, changes + 1.0, count)
@@ -567,12 +611,13 @@ def _numpy_fits(
     first_lead = _lead(levels[0], lead)
     lo = np.searchsorted(t, targets + first_lead - 2.0 * levels[0], side="left")
     hi = np.searchsorted(t, targets + first_lead, side="right")
-    changed = changes_up_to(y)
+    changed, turned = changes_up_to(y), turns(y)
     white, step = _window_noise(t, y, lo, hi)
     out = [np.empty((len(targets), y.shape[1])) for _ in range(5)]
     for start in range(0, len(targets), BLOCK):  # a block of targets at a time: its levels stay in cache
         part = slice(start, start + BLOCK)
-        chosen = _block_fits(t, y, targets[part], levels, order, lead, derivative, white[part], step[part], changed)
+        chosen = _block_fits(t, y, targets[part], levels, order, lead, derivative, white[part], step[part], changed,
+                             turned)  # fmt: skip
         for whole, level in zip(out, chosen, strict=True):
             whole[part] = level
     return tuple(out)
@@ -589,11 +634,13 @@ def _block_fits(
     white: np.ndarray,
     step: np.ndarray,
     changed: np.ndarray,
+    turned: np.ndarray,
 ) -> list[np.ndarray]:
     """:func:`adaptive_fits` for a block of targets, with their windows' noise: value, first and
     second derivative, and the chosen derivative's noise's and stated standard deviation
     (:func:`stated_std`) (M, n). Levels whose window is too small at every target of the block are
-    not fitted. ``changed``: y's :func:`changes_up_to`."""
+    not fitted. ``changed``, ``turned``: y's :func:`changes_up_to` and :func:`turns`; a window's
+    rounding errors are counted as the fewer of its changes and its turns."""
     needed = order + 3
     fits = []
     changes = []
@@ -604,7 +651,7 @@ def _block_fits(
         if fits and not np.any(hi - lo >= needed):
             break  # smaller windows hold fewer samples still
         fits.append(polynomial_fits(t, y, targets, h, order, level_lead, variance=True))
-        changes.append(changes_within(changed, lo, hi)[0])
+        changes.append(np.minimum(changes_within(changed, lo, hi)[0], TURNS * turns_within(turned, lo, hi, step)))
     valid = np.stack([f[5] >= needed for f in fits])[:, :, None]
     estimates = np.stack([f[derivative] for f in fits])
     stds = np.stack([
@@ -720,6 +767,7 @@ def _numpy_fit(
     estimates = np.where(second, d2, d1)
     variance = np.where(second, var2[:, None], var1[:, None])
     changes, _ = changes_within(changes_up_to(window), start, end)  # (levels, n) within each level's window
+    changes = np.minimum(changes, TURNS * turns_within(turns(window), start, end, np.broadcast_to(step, changes.shape)))
     stds = accel_std(variance, white, step, counts[:, None], changes, value[0])
     usable = np.broadcast_to(valid[:, None], estimates.shape)
     chosen, _ = select(estimates, stds, usable)

@@ -356,6 +356,24 @@ static int fit_target(long count, const double *times, const double *values, lon
         }
     }
     for (long j = 0; j < n; j++) if (isinf(step[j]) || width < 8) step[j] = 0.0;
+    /* on a grid, each level's rounding errors are drawn afresh at most where the change between
+       consecutive samples changes by half a step or more, TURNS (2) times those (turns_within):
+       `changed` now counts the turns up to each sample of the largest window */
+    for (long j = 0; j < n; j++) { changed[j] = 0.0; if (width > 1) changed[n + j] = 0.0; }
+    for (long i = 2; i < width; i++) {
+        const double *now = values + (lo[0] + i) * n, *before = now - n, *earlier = before - n;
+        double *count = changed + i * n;
+        for (long j = 0; j < n; j++) {
+            double turn = fabs((now[j] - before[j]) - (before[j] - earlier[j]));
+            count[j] = count[j - n] + (step[j] > 0.0 && turn >= 0.5 * step[j] ? 1.0 : 0.0);
+        }
+    }
+    for (long l = 0; l < rings; l++)
+        for (long j = 0; j < n; j++) {
+            double turns = hi[l] - 1 > lo[l] + 1
+                ? changed[(hi[l] - 1 - lo[0]) * n + j] - changed[(lo[l] + 1 - lo[0]) * n + j] : 0.0;
+            if (2.0 * turns < changes[l * n + j]) changes[l * n + j] = 2.0 * turns;  /* TURNS */
+        }
     /* every valid level's fit, the sums gathered ring by ring from the smallest window outwards; the
        lower degree's from the same sums (its normal equations are their leading rows and columns) */
     double sums[33], h0 = levels[0];
