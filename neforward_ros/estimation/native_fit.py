@@ -359,8 +359,10 @@ static int fit_target(long count, const double *times, const double *values, lon
     /* on a grid, each level's rounding errors are drawn afresh at most where the change between
        consecutive samples changes by half a step or more, TURNS (2) times those (turns_within):
        `changed` now counts the turns up to each sample of the largest window */
+    int gridded = 0;  /* no column on a grid: its counts are not used (accel_std), nothing to count */
+    for (long j = 0; j < n; j++) gridded |= step[j] > 0.0;
     for (long j = 0; j < n; j++) { changed[j] = 0.0; if (width > 1) changed[n + j] = 0.0; }
-    for (long i = 2; i < width; i++) {
+    for (long i = 2; i < width && gridded; i++) {
         const double *now = values + (lo[0] + i) * n, *before = now - n, *earlier = before - n;
         double *count = changed + i * n;
         for (long j = 0; j < n; j++) {
@@ -368,7 +370,7 @@ static int fit_target(long count, const double *times, const double *values, lon
             count[j] = count[j - n] + (step[j] > 0.0 && turn >= 0.5 * step[j] ? 1.0 : 0.0);
         }
     }
-    for (long l = 0; l < rings; l++)
+    for (long l = 0; l < rings && gridded; l++)
         for (long j = 0; j < n; j++) {
             double turns = hi[l] - 1 > lo[l] + 1
                 ? changed[(hi[l] - 1 - lo[0]) * n + j] - changed[(lo[l] + 1 - lo[0]) * n + j] : 0.0;
