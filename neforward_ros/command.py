@@ -3,11 +3,13 @@
 Until the command's own handling is in place (:func:`neforward_ros.cli.main`), a Ctrl-C ends the
 process at once with the one line every interrupted command prints and exit code 130, instead of a
 traceback from wherever the imports were. A SIGINT that the process inherited as ignored (a
-background job of a non-interactive shell) stays ignored.
+background job of a non-interactive shell) stays ignored. The handler goes in through the builtin
+``_signal`` (0.1 ms), not ``signal`` (1-1.5 ms: it builds its enums first), so that the moments
+before it, when Python's own KeyboardInterrupt still applies, are as few as can be.
 """
 
+import _signal
 import os
-import signal
 
 
 def interrupted_early(signum: int, frame: object) -> None:
@@ -15,8 +17,8 @@ def interrupted_early(signum: int, frame: object) -> None:
     os._exit(130)
 
 
-if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
-    signal.signal(signal.SIGINT, interrupted_early)
+if _signal.getsignal(_signal.SIGINT) is not _signal.SIG_IGN:
+    _signal.signal(_signal.SIGINT, interrupted_early)
 
 
 def entry() -> None:

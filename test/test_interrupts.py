@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import pty
+import re
 import select
 import signal
 import subprocess
@@ -107,15 +108,26 @@ def long_recording(tmp_path_factory) -> Path:
 OUTPUTS = ["out", "out.csv", "out.png"]
 
 
+BEFORE_HANDLER = ("neforward_ros/__init__.py", "neforward_ros/__main__.py", "neforward_ros/command.py")
+"""The package's files that run before its SIGINT handler is in (neforward_ros.command puts it in)."""
+
+
+def before_handler(output: str) -> bool:
+    """Whether every frame of the package in a traceback is one that runs before its handler is in."""
+    frames = re.findall(r'File "([^"]*neforward_ros/[^"]*)"', output)
+    return all(frame.endswith(BEFORE_HANDLER) for frame in frames) and "interrupted_early" not in output
+
+
 def interpreter_start(code: int, output: str) -> bool:
-    """Whether the signal ended the interpreter's own start-up, before any code of the package ran
-    (silently, in site's imports, or while runpy still looks for the module: its own traceback)."""
+    """Whether the signal ended the interpreter's own start-up, before the package's handler was in
+    (silently, in site's imports, or with Python's own KeyboardInterrupt while runpy looks for the
+    module or the package's first lines import what installs the handler)."""
     before_package = "neforward_ros/" not in output
     return (
         (code == -signal.SIGINT and output.strip() == "")
         or (code == 1 and "Fatal Python error: init_import_site" in output and before_package)
         or (code in (1, -signal.SIGINT) and "KeyboardInterrupt" in output and "<frozen runpy>" in output
-            and before_package)
+            and before_handler(output))
     )  # fmt: skip
 
 
@@ -174,3 +186,26 @@ def test_ctrl_c_in_run_stops_it_at_any_moment(tmp_path) -> None:
             ), (delay, code, run.output)
         if delay is None:
             assert code == 0
+
+
+SEEN_AT_START = """Traceback (most recent call last):
+  File "<frozen runpy>", line 198, in _run_module_as_main
+  File "<frozen runpy>", line 88, in _run_code
+  File "/work/main/neforward_ros/__main__.py", line 3, in <module>
+    from neforward_ros.command import entry
+  File "/work/main/neforward_ros/command.py", line 10, in <module>
+    import signal
+  File "/usr/lib/python3.11/signal.py", line 10, in <lambda>
+    name.isupper()
+KeyboardInterrupt
+"""
+
+
+def test_only_a_traceback_before_the_handler_counts_as_the_interpreters() -> None:
+    """Python's KeyboardInterrupt while the package's first lines run (seen in CI, 2026-11-26) is the
+    interpreter's start; one from any later module of the package is a failure of ours."""
+    assert interpreter_start(1, SEEN_AT_START)
+    later = SEEN_AT_START.replace("neforward_ros/command.py", "neforward_ros/cli.py")
+    assert not interpreter_start(1, later)
+    handler = SEEN_AT_START.replace('line 10, in <module>', 'line 16, in interrupted_early')
+    assert not interpreter_start(1, handler)
