@@ -207,5 +207,5 @@ def test_only_a_traceback_before_the_handler_counts_as_the_interpreters() -> Non
     assert interpreter_start(1, SEEN_AT_START)
     later = SEEN_AT_START.replace("neforward_ros/command.py", "neforward_ros/cli.py")
     assert not interpreter_start(1, later)
-    handler = SEEN_AT_START.replace('line 10, in <module>', 'line 16, in interrupted_early')
+    handler = SEEN_AT_START.replace("line 10, in <module>", "line 16, in interrupted_early")
     assert not interpreter_start(1, handler)
