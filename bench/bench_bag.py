@@ -81,10 +81,17 @@ with Reader(sys.argv[1]) as reader:
 """
 
 
+def installed() -> dict[str, str]:
+    """The environment of both timed processes: Python's bytecode cache on, as in an install (pip
+    compiles it; colcon too). This machine's shell may turn it off (PYTHONDONTWRITEBYTECODE), which
+    would time the compilation of every module; the peer and the command run alike."""
+    return {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+
+
 def rosbags_process(path: Path) -> float:
     """The peer of the long run: a whole Python process reading and deserializing every message."""
     start = time.perf_counter()
-    subprocess.run([sys.executable, "-c", PEER_SCRIPT, str(path)], check=True, capture_output=True)
+    subprocess.run([sys.executable, "-c", PEER_SCRIPT, str(path)], env=installed(), check=True, capture_output=True)
     return time.perf_counter() - start
 
 
@@ -117,6 +124,10 @@ def check_accelerations(recording: Path, output: Path, seconds: float) -> float:
     return float(np.abs(np.asarray(accels) - exact_in_root).max() / np.abs(exact_in_root).max())
 
 
+def verdict(every_run_met: bool) -> str:
+    return "met in every run" if every_run_met else "NOT met in every run"
+
+
 def long_run(folder: Path, repeats: int) -> None:
     seconds = 600.0
     count = make_recording(folder / "long", seconds)
@@ -134,10 +145,11 @@ def long_run(folder: Path, repeats: int) -> None:
     print(f"{count} joint states ({seconds:g} s at 500 Hz, 8 joints, positions only), median of {repeats}")
     print(f"a whole Python process reading and deserializing it with rosbags: {a:.2f} s  (runs: "
           f"{', '.join(f'{x:.2f}' for x in peer)})")  # fmt: skip
-    print(f"`neforward bag`, warm: {b:.2f} s, ratio {b / a:.2f} (target <= 1.5); runs: "
-          f"{', '.join(f'{x:.2f}' for x in warm)}")  # fmt: skip
-    print(f"`neforward bag`, cold: {c:.2f} s, ratio {c / a:.2f} (target <= 1.8); runs: "
-          f"{', '.join(f'{x:.2f}' for x in cold)}")  # fmt: skip
+    for what, runs, ratio, target in (("warm", warm, b / a, 1.5), ("cold", cold, c / a, 1.8)):
+        pairs = [x / y for x, y in zip(runs, peer, strict=True)]  # each run against the peer run beside it
+        print(f"`neforward bag`, {what}: {statistics.median(runs):.2f} s, ratio {ratio:.2f} (target <= {target:g}); "
+              f"runs: {', '.join(f'{x:.2f}' for x in runs)}; each against the peer's run beside it: "
+              f"{', '.join(f'{x:.2f}' for x in pairs)} ({verdict(max(pairs) <= target)})")  # fmt: skip
     print(
         f"link accelerations on the last minute against the exact ones: largest error {100 * error:.2g} % of "
         "the largest acceleration"
@@ -154,9 +166,7 @@ def neforward_bag(path: Path, output: Path) -> float:
 def neforward_command(path: Path, output: Path, cache: Path) -> float:
     """The whole command as a user runs it, process start included, with the model cache at ``cache``."""
     shutil.rmtree(output, ignore_errors=True)
-    # Python's bytecode cache on, as in an install (pip compiles it; colcon too): this machine's shell
-    # may turn it off (PYTHONDONTWRITEBYTECODE), which would time the compilation of every module.
-    environment = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    environment = installed()
     environment["NEFORWARD_CACHE"] = str(cache)
     command = [
         str(Path(sys.executable).with_name("neforward")),

@@ -219,6 +219,35 @@ def test_impossible_masses_and_inertias_are_used_as_given_with_a_warning_naming_
     np.testing.assert_allclose(inverse_dynamics(model, q, [0.5], [-0.7]).joint_torque, expected, rtol=1e-12, atol=1e-12)
 
 
+def test_rounding_noise_in_a_massive_robots_zero_inertia_is_not_a_warning() -> None:
+    """iCub's published models (icub-models) write a 0.5 kg link's zero inertia as ixx = iyy =
+    -5.42101e-20 and another's as ixz = 2.4e-35: rounding, beside the robot's moments of 1e-3 kg m^2.
+    A moment of -1e-5 beside them is no rounding, and still warned."""
+
+    def robot(small: str) -> str:
+        return (
+            '<robot name="r"><link name="a"/>'
+            '<link name="b"><inertial><mass value="5"/><inertia ixx="0.02" ixy="0" ixz="0" iyy="0.03" iyz="0" '
+            'izz="0.04"/></inertial></link>'
+            f'<link name="c"><inertial><origin xyz="0 0 0.03"/><mass value="0.526"/><inertia {small}/>'
+            "</inertial></link>"
+            '<joint name="j1" type="revolute"><parent link="a"/><child link="b"/><axis xyz="0 0 1"/>'
+            '<limit lower="-1" upper="1" effort="1" velocity="1"/></joint>'
+            '<joint name="j2" type="revolute"><parent link="b"/><child link="c"/><origin xyz="0.2 0 0"/>'
+            '<axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="1" velocity="1"/></joint></robot>'
+        )
+
+    noise = 'ixx="-5.42101e-20" ixy="0" ixz="0" iyy="-5.42101e-20" iyz="0" izz="0"'
+    assert load_model(robot(noise)).inertia_warnings == ()
+    assert load_model(robot('ixx="0" ixy="0" ixz="2.40741e-35" iyy="0" iyz="0" izz="0"')).inertia_warnings == ()
+    wrong = load_model(robot('ixx="-1e-5" ixy="0" ixz="0" iyy="1e-5" iyz="0" izz="1e-5"')).inertia_warnings
+    assert len(wrong) == 1 and wrong[0].startswith("link 'c'") and "negative principal moment" in wrong[0]
+    q, qd, qdd = [0.3, -0.2], [0.5, 0.4], [-0.7, 1.1]
+    expected = pinocchio_torque(robot(noise), q, qd, qdd)
+    torque = inverse_dynamics(load_model(robot(noise)), q, qd, qdd).joint_torque
+    np.testing.assert_allclose(torque, expected, rtol=1e-12)
+
+
 def pinocchio_torque(text: str, q, qd, qdd) -> np.ndarray:
     import pinocchio as pin
 

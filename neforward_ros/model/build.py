@@ -38,8 +38,8 @@ _KINDS = {kind.value: kind for kind in JointKind}
 _AS_FIXED = ("floating", "planar")
 
 INERTIA_TOLERANCE = 1e-6
-"""Relative slack of the inertia checks (of the largest principal moment): the rounding of a URDF's
-numbers, printed to six or more significant digits, stays within it."""
+"""Relative slack of the inertia checks (of the link's largest principal moment, or the robot's where
+larger): the rounding of a URDF's numbers, printed to six or more significant digits, stays within it."""
 
 
 def build_model(robot: UrdfRobot, root_link: str | None = None) -> RobotModel:
@@ -121,7 +121,9 @@ def build_model(robot: UrdfRobot, root_link: str | None = None) -> RobotModel:
     for joint in tree_joints:
         parent_joints.append(_parent_joint(joint, link_index[joint.parent], joint_index, mimics))
 
-    inertias = [_inertia(link_by_name[name]) for name in link_names]
+    links = [link_by_name[name] for name in link_names]
+    scale = max((_largest_moment(link) for link in links), default=0.0)
+    inertias = [_inertia(link, scale) for link in links]
     return RobotModel(
         name=robot.name,
         link_names=tuple(link_names),
@@ -230,16 +232,33 @@ def _parent_joint(
     )
 
 
-def _inertia(link: UrdfLink) -> tuple[float, Vec3, Mat3, str]:
-    """(mass, centre of mass in the link frame, inertia about it along the link axes, a warning or "")."""
+def _inertia_along_link(link: UrdfLink) -> np.ndarray:
+    """The link's inertia about its centre of mass along the link axes (3x3, symmetric), kg m^2."""
+    assert link.inertial is not None
+    rotation = link.inertial.origin[:3, :3]
+    inertia = rotation @ link.inertial.inertia @ rotation.T
+    return 0.5 * (inertia + inertia.T)
+
+
+def _largest_moment(link: UrdfLink) -> float:
+    """The link's largest principal moment in magnitude, kg m^2 (0 without an inertial)."""
+    if link.inertial is None:
+        return 0.0
+    return float(np.abs(np.linalg.eigvalsh(_inertia_along_link(link))).max())
+
+
+def _inertia(link: UrdfLink, robot_scale: float) -> tuple[float, Vec3, Mat3, str]:
+    """(mass, centre of mass in the link frame, inertia about it along the link axes, a warning or "").
+
+    The checks allow rounding: INERTIA_TOLERANCE of the link's largest principal moment or of the
+    robot's, whichever is larger. Converters write a massive link's zero inertia as ``-5.42101e-20``
+    (iCub's published models): nothing a torque can show, and no cause for a warning."""
     inertial = link.inertial
     if inertial is None:
         return 0.0, (0.0, 0.0, 0.0), (0.0,) * 9, ""  # type: ignore[return-value]
-    rotation = inertial.origin[:3, :3]
-    inertia = rotation @ inertial.inertia @ rotation.T
-    inertia = 0.5 * (inertia + inertia.T)
+    inertia = _inertia_along_link(link)
     moments = np.linalg.eigvalsh(inertia)
-    slack = INERTIA_TOLERANCE * max(float(np.abs(moments).max()), 1e-300)
+    slack = INERTIA_TOLERANCE * max(float(np.abs(moments).max()), robot_scale, 1e-300)
     problems = []
     if inertial.mass < 0.0:
         problems.append(f"a negative mass ({inertial.mass:.6g} kg)")
