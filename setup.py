@@ -39,6 +39,7 @@ setup(
             "xacro>=2.0",
             "example-robot-data>=4",
             "pybullet>=3.2",
+            "icub-models>=3",
         ],
     },
     zip_safe=True,

@@ -4,7 +4,9 @@ link kinematics and joint torques agree with Pinocchio's at random states to 1e-
 
 - example-robot-data (69 files: Panda, UR, TIAGo, Talos, iCub, Go2, G1, ANYmal, Baxter, PR2 ...);
 - pybullet_data, shipped with pybullet (1095 files: KUKA iiwa, Franka Panda, xArm, Husky, Minitaur,
-  Laikago, A1, Aliengo, R2D2, and a thousand generated objects).
+  Laikago, A1, Aliengo, R2D2, and a thousand generated objects);
+- icub-models (the iCub humanoids of several labs, 16 files of 32 joints, written by a CAD converter:
+  inertias with rounding noise such as -5.42e-20 kg m^2).
 
 Pinocchio reads the file itself (urdfdom), with mimic joints as independent joints (its default):
 a mimic joint of ours is given its leader's state times the multiplier, and its torque is added to
@@ -30,12 +32,16 @@ from conftest import assert_close
 pin = pytest.importorskip("pinocchio", reason="pip install pin (Pinocchio, the test oracle; a test extra)")
 
 
-def example_robot_data() -> list[Path]:
+def package_files(distribution: str) -> list[Path]:
     try:
-        files = importlib.metadata.files("example-robot-data") or []
+        files = importlib.metadata.files(distribution) or []
     except importlib.metadata.PackageNotFoundError:
         return []
     return sorted(Path(str(f.locate())) for f in files if str(f).endswith(".urdf"))
+
+
+def example_robot_data() -> list[Path]:
+    return package_files("example-robot-data")
 
 
 def pybullet_data() -> list[Path]:
@@ -46,7 +52,12 @@ def pybullet_data() -> list[Path]:
 
 
 CORPORA = {
-    "example-robot-data": (example_robot_data, "pip install example-robot-data (a test extra)", 60),
+    "example-robot-data": (
+        lambda: package_files("example-robot-data"),
+        "pip install example-robot-data (a test extra)",
+        60,
+    ),
+    "icub-models": (lambda: package_files("icub-models"), "pip install icub-models (a test extra)", 10),
     "pybullet_data": (pybullet_data, "pip install pybullet (a test extra: its pybullet_data)", 1000),
 }
 GRAVITY = np.array([0.0, 0.0, -9.81])
