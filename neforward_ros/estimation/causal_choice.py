@@ -88,10 +88,19 @@ def _layout(half_widths: tuple[float, ...]) -> tuple[np.ndarray, ...]:
     return level, used[:, :, None], used[:, :, None] & used[:, None, :], index[:, None] + index[None, :], scale
 
 
-def usable(times: np.ndarray, target: float, half_widths: np.ndarray) -> np.ndarray:
+def _bounds(times: np.ndarray, target: float, half_widths: np.ndarray, lead: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each level's window [lo, hi) among the samples: [target + min(lead, h) - 2 h, target + min(lead, h)]
+    (one-sided for lead 0, centred while h <= lead, as hindsight's are)."""
+    reach = np.minimum(lead, half_widths)
+    lo = times.searchsorted(target + reach - 2.0 * half_widths, side="left")
+    hi = times.searchsorted(target + reach, side="right")
+    return lo, hi
+
+
+def usable(times: np.ndarray, target: float, half_widths: np.ndarray, lead: float = 0.0) -> np.ndarray:
     """Which candidates' windows hold enough samples (C,): at least degree + :data:`EXTRA`."""
-    lo = times.searchsorted(target - 2.0 * half_widths, side="left")
-    return (len(times) - lo)[_layout(tuple(half_widths))[0]] >= np.repeat(np.array(DEGREES), len(half_widths)) + EXTRA
+    lo, hi = _bounds(times, target, half_widths, lead)
+    return (hi - lo)[_layout(tuple(half_widths))[0]] >= np.repeat(np.array(DEGREES), len(half_widths)) + EXTRA
 
 
 def _wanted(only: np.ndarray | None, count: int) -> np.ndarray | None:
@@ -110,16 +119,20 @@ def candidates(
     half_widths: np.ndarray,
     derivative: np.ndarray,
     only: np.ndarray | None = None,
+    lead: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Every candidate's one-sided fit at ``target``, the newest of the samples or after it (or only
-    those of the indices ``only``, the others NaN).
+    """Every candidate's fit at ``target`` (or only those of the indices ``only``, the others NaN): its
+    window reaching ``lead`` past the target, or half its width where that is less (a causal fit, lead
+    0: one-sided, the target the newest of the samples or after it).
 
     Args:
-        times: the samples' times (W,), s, increasing, the largest window's ([target - 2 h, target]).
+        times: the samples' times (W,), s, increasing, the largest window's ([target + lead - 2 h,
+            target + lead]).
         values: the samples (W, n).
         target: s.
         half_widths: the ladder (L,), s, largest first.
         derivative: (n,) 2 for a column of positions, 1 for one of velocities.
+        lead: s.
 
     Returns:
         value, first and second derivative at ``target``, the estimate of q'' (the
@@ -135,11 +148,11 @@ def candidates(
     if library is not None:
         wanted = _wanted(only, len(DEGREES) * len(half_widths))
         got = native_fit.causal_candidates(library, times, values, target, half_widths, DEGREES, EXTRA, derivative,
-                                           wanted)  # fmt: skip
+                                           wanted, lead)  # fmt: skip
         if got is not None:
             value, first, second, variance = (got[:, :, q] for q in range(4))
             return value, first, second, np.where(derivative == 2, second, first), variance
-    return python_candidates(times, values, target, half_widths, derivative, only)
+    return python_candidates(times, values, target, half_widths, derivative, only, lead)
 
 
 def python_candidates(
@@ -149,11 +162,12 @@ def python_candidates(
     half_widths: np.ndarray,
     derivative: np.ndarray,
     only: np.ndarray | None = None,
+    lead: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`candidates` in numpy: one batch of normal equations for every candidate fitted."""
-    lo = times.searchsorted(target - 2.0 * half_widths, side="left")
+    lo, hi = _bounds(times, target, half_widths, lead)
     level, used, square, hankel, scale = _layout(tuple(half_widths))
-    fitted = usable(times, target, half_widths)
+    fitted = usable(times, target, half_widths, lead)
     if only is not None:
         fitted &= _wanted(only, len(level))
     rows = np.flatnonzero(fitted)
@@ -167,7 +181,8 @@ def python_candidates(
     # entries) and sum_i tau_i^k y_i, 0 outside each level's window.
     top = DEGREES[-1]
     powers = np.empty((2 * top + 1, *tau.shape))
-    powers[0] = np.arange(len(times))[None, :] >= lo[needed, None]
+    index = np.arange(len(times))[None, :]
+    powers[0] = (index >= lo[needed, None]) & (index < hi[needed, None])
     for power in range(1, 2 * top + 1):
         np.multiply(powers[power - 1], tau, out=powers[power])
     sums = powers @ np.ones(len(times))  # (2 top + 1, L')

@@ -244,9 +244,18 @@ class KalmanBank:
         of its estimate there (smoothed for a fixed lag) and the spread of the models' estimates about
         the one given, by the weights, scaled up by the joint's mean normalised revision where it is
         above 1 (:meth:`_revised`)."""
+        _, _, mixture, std = self.estimates(target)
+        return mixture, std
+
+    def estimates(self, target: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Each model's own position, velocity and acceleration at the target (models, 3, m), smoothed for
+        a fixed lag, each model's variance of that acceleration (models,), and :meth:`estimate`'s mixture
+        (3, m) and standard deviations (m,), from one reading of the filters (a joint's mean normalised
+        revision moves once per target)."""
         at = self._model_of(target)
         estimates = self.track.estimate(at)  # (M, 3, m)
-        variances = self.track.acceleration_variance(at)[:, None]  # (M, 1)
+        own = self.track.acceleration_variance(at)  # (M,)
+        variances = own[:, None]  # (M, 1)
         if len(estimates) == 1:
             weights = np.ones((1, estimates.shape[2]))
         else:
@@ -254,7 +263,16 @@ class KalmanBank:
         mixture = np.add.reduce(weights[:, None, :] * estimates, axis=0)
         spread = estimates[:, 2] - mixture[2]
         variance = np.add.reduce(weights * (variances + spread * spread), axis=0)
-        return mixture, np.sqrt(variance * np.maximum(self._revised(at, weights, mixture[2], variances), 1.0))
+        std = np.sqrt(variance * np.maximum(self._revised(at, weights, mixture[2], variances), 1.0))
+        return estimates, own, mixture, std
+
+    def converged(self, target: int) -> np.ndarray:
+        """Which models (models,) have had the samples since the start to converge from their prior by the
+        target: :data:`SETTLE`, or twice the model's length scale where longer (the 0.6 s model's q'' is
+        still tens of times its later error after a second's samples)."""
+        scales = np.array([model.settings.length_scale for model in self.models.models])
+        since = 0.0 if self._origin is None else (target - self._origin) / NS
+        return since >= np.maximum(SETTLE, 2.0 * scales)
 
     def _revised(self, at: int, weights: np.ndarray, smoothed: np.ndarray, variances: np.ndarray) -> np.ndarray:
         """Each joint's mean normalised revision (m,), updated with the fixed-lag estimate at ``at`` (the

@@ -486,28 +486,40 @@ void adaptive_fits(long count, const double *times, const double *values, long n
    wanted is NULL or wanted[c], and its window holds at least degree + extra samples: value, first and
    second derivative, and the derivative's variance factor for unit noise into out (C, n, 4); NaN
    elsewhere. The samples' powers are in the largest window's unit, rescaled per level (level_fit). */
+static void add_samples(long from, long to, const double *times, const double *values, long n, double target,
+                        double h0, long width, long rows, double *sums, double *moments) {
+    for (long i = to - 1; i >= from; i--) {
+        double u = (times[i] - target) / h0, power = 1.0;
+        for (long k = 0; k < width; k++) {
+            sums[k] += power;
+            if (k < rows) for (long j = 0; j < n; j++) moments[k * n + j] += power * values[i * n + j];
+            power *= u;
+        }
+    }
+}
+
+/* Each level's window reaches min(lead, h) past the target ([target + min(lead, h) - 2 h, target + min(lead,
+   h)]: one-sided for lead 0, centred while h <= lead); from the smallest level up the windows are nested,
+   so the running sums take each level's new samples on either side. */
 void causal_candidates(long count, const double *times, const double *values, long n, double target,
-                       long nlevels, const double *levels, long ndeg, const long *degrees, long extra,
-                       const long *derivative, const unsigned char *wanted, double *out) {
+                       double lead, long nlevels, const double *levels, long ndeg, const long *degrees,
+                       long extra, const long *derivative, const unsigned char *wanted, double *out) {
     long top = 0;
     for (long k = 0; k < ndeg; k++) if (degrees[k] > top) top = degrees[k];
-    long hi = upper_bound(times, count, target), width = 2 * top + 1, rows = top + 1;
+    long width = 2 * top + 1, rows = top + 1;
     double h0 = levels[0];
     double *sums = calloc((size_t)width, sizeof(double)), *moments = calloc((size_t)rows * n, sizeof(double));
     double *fit = malloc((size_t)n * 5 * sizeof(double));
-    long next = hi;  /* the samples [next, hi) are in the running sums */
+    long next = upper_bound(times, count, target), last = next;  /* the samples [next, last) are in the sums */
     for (long c = 0; c < ndeg * nlevels * n * 4; c++) out[c] = NAN;
     for (long l = nlevels - 1; l >= 0; l--) {
-        long lo = lower_bound(times, count, target - 2.0 * levels[l]);
-        for (long i = next - 1; i >= lo; i--) {
-            double u = (times[i] - target) / h0, power = 1.0;
-            for (long k = 0; k < width; k++) {
-                sums[k] += power;
-                if (k < rows) for (long j = 0; j < n; j++) moments[k * n + j] += power * values[i * n + j];
-                power *= u;
-            }
-        }
+        double reach = lead < levels[l] ? lead : levels[l];
+        long lo = lower_bound(times, count, target + reach - 2.0 * levels[l]);
+        long hi = upper_bound(times, count, target + reach);
+        if (lo < next) add_samples(lo, next, times, values, n, target, h0, width, rows, sums, moments);
+        if (hi > last) add_samples(last, hi, times, values, n, target, h0, width, rows, sums, moments);
         if (lo < next) next = lo;
+        if (hi > last) last = hi;
         for (long k = 0; k < ndeg; k++) {
             long c = k * nlevels + l;
             if ((wanted != NULL && !wanted[c]) || hi - lo < degrees[k] + extra) continue;
@@ -705,8 +717,8 @@ def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
                                       long, long, long, pointer, pointer, double, double, double, double, double,
                                       double, pointer, pointer]  # fmt: skip
     library.adaptive_fits.restype = None
-    library.causal_candidates.argtypes = [long, pointer, pointer, long, double, long, pointer, long, pointer, long,
-                                          pointer, pointer, pointer]  # fmt: skip
+    library.causal_candidates.argtypes = [long, pointer, pointer, long, double, double, long, pointer, long, pointer,
+                                          long, pointer, pointer, pointer]  # fmt: skip
     library.causal_candidates.restype = None
     library.choose_degrees.argtypes = [long, long, long, pointer, ctypes.c_longlong, pointer, long, long, pointer,
                                        long, long, pointer, long, double, double, long, pointer, pointer]  # fmt: skip
@@ -827,6 +839,7 @@ def causal_candidates(
     extra: int,
     derivative: np.ndarray,
     wanted: np.ndarray | None = None,
+    lead: float = 0.0,
 ) -> np.ndarray | None:
     """The C function's causal candidates (:func:`neforward_ros.estimation.causal_choice.candidates`):
     value, first and second derivative and the derivative's variance factor (C, n, 4), NaN where a
@@ -840,9 +853,10 @@ def causal_candidates(
     half_widths = np.ascontiguousarray(half_widths, dtype=float)
     chosen = None if wanted is None else np.ascontiguousarray(wanted, dtype=np.uint8)
     each, columns = _longs(np.array(degrees)), _longs(derivative)  # kept alive across the call
-    library.causal_candidates(len(times), times.ctypes.data, values.ctypes.data, n, float(target), len(half_widths),
-                              half_widths.ctypes.data, len(degrees), each.ctypes.data, extra, columns.ctypes.data,
-                              None if chosen is None else chosen.ctypes.data, out.ctypes.data)  # fmt: skip
+    library.causal_candidates(len(times), times.ctypes.data, values.ctypes.data, n, float(target), float(lead),
+                              len(half_widths), half_widths.ctypes.data, len(degrees), each.ctypes.data, extra,
+                              columns.ctypes.data, None if chosen is None else chosen.ctypes.data,
+                              out.ctypes.data)  # fmt: skip
     return out
 
 

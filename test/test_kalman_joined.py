@@ -1,0 +1,98 @@
+"""The Kalman settings with the bank: its models join the local fits' candidates for the same delay,
+each joint's estimate the candidate's whose q'' matched the centred fit best half a window later
+(``estimation/causal_choice.py``), the bank's own estimate serving a joint without a record and, at a
+fixed lag, checking the choice at every target.
+
+Against hindsight (the best fixed-window polynomial for the same delay, chosen knowing the truth:
+bench/hindsight.py) on motions, rates, encoders and seeds the estimator benchmark does not use, and
+through a time reset in the middle of a move.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from neforward_ros.estimation import stream as stream_module
+from neforward_ros.estimation.settings import StreamSettings
+from neforward_ros.estimation.stream import StreamingEstimator
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+import bench_transients
+from hindsight import best, relative_rms
+from motion_family import make
+
+EPOCH_NS = 1_700_000_000 * 10**9
+
+
+def ratio(settings: StreamSettings, kind: str, rate: float, bits: int, seed: int, seconds: float = 3.0) -> float:
+    """The setting's q'' relative RMS error over hindsight's for its delay (1 s to the last 0.5 s)."""
+    t, q, _, qdd = make(kind, rate, bits, seed, seconds=seconds)
+    names = [f"j{k}" for k in range(q.shape[1])]
+    estimator = StreamingEstimator(names, settings=settings, log=lambda level, message: None)
+    stamps = EPOCH_NS + np.round(t * 1e9).astype(np.int64)
+    found: dict[int, np.ndarray] = {}
+    for k in range(len(t)):
+        for estimate in estimator.update(int(stamps[k]), names, q[k].tolist()):
+            found[estimate.stamp_ns] = estimate.accelerations
+    evaluated = np.flatnonzero((t > 1.0) & (t < t[-1] - 0.5))
+    got = np.array([found[int(stamps[k])] for k in evaluated])
+    return relative_rms(got, qdd[evaluated]) / best(t, q, qdd, evaluated, settings.effective_lag)[0]
+
+
+FIXED_LAG = StreamSettings(method="kalman")
+CASES = [
+    # (kind, rate, bits, seed): measured 1.01, 1.37, 1.28, 1.05, 0.45 (2026-11-26); the bank alone 1.76, 1.43,
+    # 1.41, 1.12, 0.45
+    ("sines0.5", 800.0, 20, 41),
+    ("minjerk", 700.0, 18, 43),
+    ("trapezoid", 900.0, 20, 50),
+    ("sines3", 600.0, 16, 47),
+    ("gait", 400.0, 14, 45),
+]
+
+
+@pytest.mark.parametrize("case", CASES, ids=[f"{c[0]}-{c[1]:g}Hz-{c[2]}bits" for c in CASES])
+def test_the_kalman_20_ms_setting_is_within_1_5x_of_hindsight(case: tuple) -> None:
+    assert ratio(FIXED_LAG, *case) <= 1.5
+
+
+def test_the_bank_alone_fails_the_same_check(monkeypatch) -> None:
+    """The planted bug: the bank's models not among the candidates (the bank's own estimate, the setting
+    before): a slow sine through a 20-bit encoder, where the likelihood's mixture lags the best fit."""
+    made = StreamingEstimator.__init__
+
+    def alone(self, *args, **kwargs) -> None:
+        made(self, *args, **kwargs)
+        self._joined, self._scores, self._models = False, None, 0
+
+    monkeypatch.setattr(StreamingEstimator, "__init__", alone)
+    assert ratio(FIXED_LAG, *CASES[0]) > 1.5
+
+
+def transients() -> tuple[float, float]:
+    """bench/bench_transients.py's first arm (7 joints, minimum-jerk moves with dwells, 500 Hz, 16 bits, a
+    0.3 s gap, then the stamps 60 s back: a looped recording, in the middle of a move): the steady 99th
+    percentile of |q'' error| (rad/s^2; the moves' q'' reach 20 rad/s^2), and the worst error in the
+    second after each of the start, the gap and the reset over it."""
+    p99, worst, lost = bench_transients.run(FIXED_LAG, "minjerk", 1)
+    assert lost == 0
+    return p99, max(worst) / p99
+
+
+def test_moves_starts_and_a_time_reset_stay_within_the_steady_error() -> None:
+    """Measured 1.34 rad/s^2, and 1.83x it after the reset (2026-11-26)."""
+    p99, ratio = transients()
+    assert p99 <= 2.0 and ratio <= 3.0, (p99, ratio)
+
+
+def test_checked_only_where_the_candidates_are_kept_a_move_s_start_goes_through(monkeypatch) -> None:
+    """The planted bug: the bank's estimate checks the chosen one only at the targets kept for scoring
+    (as the causal fits' rule does): a move's start between two checks goes through, and the steady
+    99th percentile is 6.4 rad/s^2."""
+    monkeypatch.setattr(stream_module, "BANK_GUARDS_EVERY_TARGET", False)
+    with pytest.raises(AssertionError):
+        test_moves_starts_and_a_time_reset_stay_within_the_steady_error()
