@@ -225,8 +225,8 @@ def models_never_available(monkeypatch) -> None:
     kept = stream_module.StreamingEstimator._model_candidates
 
     def unavailable(self, group, target, values, derivative):
-        value, first, second, estimate, floors = kept(self, group, target, values, derivative)
-        return value, first, second, np.full_like(estimate, np.nan), floors
+        (value, first, second, estimate, floors), bank = kept(self, group, target, values, derivative)
+        return (value, first, second, np.full_like(estimate, np.nan), floors), bank
 
     monkeypatch.setattr(stream_module.StreamingEstimator, "_model_candidates", unavailable)
 
@@ -234,11 +234,14 @@ def models_never_available(monkeypatch) -> None:
 @pytest.mark.parametrize("planted", [False, True])
 def test_the_bank_s_models_are_chosen_where_they_follow_the_motion_better_than_any_fit(monkeypatch, planted) -> None:
     """Smooth motions (a gait, slow and fast sines), on seeds the benchmark does not use: the kalman causal
-    setting's error is at most 0.8 of polyfit causal's (0.55-0.62 of it: its models are chosen there).
-    Planted (the models never available), it is polyfit causal's, and the check fails."""
+    setting's error is at most 0.8 of polyfit causal's (0.56-0.71 of it: its models are chosen there, once
+    converged: the 0.6 s model after 1.2 s). Planted (the models never available), it is polyfit causal's,
+    and the check fails."""
     if planted:
         models_never_available(monkeypatch)
-    ratios = [causal_ratio(*case, method="kalman") / causal_ratio(*case) for case in MODEL_CASES]
+    ratios = [
+        causal_ratio(*case, seconds=4.0, method="kalman") / causal_ratio(*case, seconds=4.0) for case in MODEL_CASES
+    ]
     assert all(r <= 0.8 for r in ratios) != planted, ratios
 
 
@@ -262,8 +265,8 @@ def test_a_chosen_candidate_without_an_estimate_hands_it_to_the_rule(monkeypatch
 
     fitted = stream_module.candidates
 
-    def singular(times, values, target, widths, derivative, only=None):
-        out = fitted(times, values, target, widths, derivative, only)
+    def singular(times, values, target, widths, derivative, only=None, lead=0.0):
+        out = fitted(times, values, target, widths, derivative, only, lead)
         return out if only is None else tuple(np.full_like(x, np.nan) for x in out)
 
     monkeypatch.setattr(stream_module, "candidates", singular)

@@ -590,7 +590,8 @@ class StreamingEstimator:
         # The rule's where a joint has no record, or where the chosen candidate's estimate leaves the rule's
         # interval (the motion changed since the record was made: a move starts after a dwell). Checked at
         # the estimates kept for scoring (every one up to 200 Hz, every fifth at 1 kHz) and, once a joint's
-        # check failed, at every estimate until it holds again.
+        # check failed, at every estimate until it holds again; against the Kalman bank's own estimate at a
+        # fixed lag, at every estimate (BANK_GUARDS_EVERY_TARGET).
         guarded = BANK_GUARDS_EVERY_TARGET and bank is not None and lead > 0.0
         if self._candidates is None and known.all() and not self._overruled[joints].any() and not guarded:
             return mine
