@@ -25,8 +25,8 @@ from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from hindsight import best, relative_rms
 from motion_family import make
+from setting_ratio import setting_ratio
 
 EPOCH_NS = 1_700_000_000 * 10**9
 
@@ -153,21 +153,12 @@ def causal_ratio(
     """The causal setting's (polyfit's unless told) q'' relative RMS error over hindsight's for zero delay
     (1 s to the last 0.5 s, every sample). ``bank_alone``: the Kalman bank's own estimate, its models not
     among the causal fit's candidates (the kalman causal setting before they joined them)."""
-    t, q, _, qdd = make(kind, rate, bits, seed, seconds=seconds)
-    names = [f"j{k}" for k in range(q.shape[1])]
-    settings = StreamSettings(method=method, mode="causal")
-    estimator = StreamingEstimator(names, settings=settings, log=lambda level, message: None)
-    if bank_alone:
+
+    def alone(estimator: StreamingEstimator) -> None:
         estimator._joined, estimator._scores, estimator._models = False, None, 0
-    stamps = EPOCH_NS + np.round(t * 1e9).astype(np.int64)
-    found: dict[int, np.ndarray] = {}
-    for k in range(len(t)):
-        for estimate in estimator.update(int(stamps[k]), names, q[k].tolist()):
-            found[estimate.stamp_ns] = estimate.accelerations
-    inside = np.flatnonzero((t > 1.0) & (t < t[-1] - 0.5))
-    evaluated = inside
-    got = np.array([found[int(stamps[k])] for k in evaluated])
-    return relative_rms(got, qdd[evaluated]) / best(t, q, qdd, evaluated, 0.0)[0]
+
+    settings = StreamSettings(method=method, mode="causal")
+    return setting_ratio(settings, kind, rate, bits, seed, seconds, alone if bank_alone else None)
 
 
 CASES = [

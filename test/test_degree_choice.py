@@ -18,29 +18,17 @@ from neforward_ros.estimation import batch, degree_choice, native_fit
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.degree_choice import DEGREES, LEAST, MEMORY, DegreePool, choose
 from neforward_ros.estimation.settings import StreamSettings
-from neforward_ros.estimation.stream import StreamingEstimator
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from hindsight import best, relative_rms
 from motion_family import make
+from setting_ratio import setting_ratio
 
 EPOCH_NS = 1_700_000_000 * 10**9
 
 
 def default_ratio(kind: str, rate: float, bits: int, seed: int, seconds: float = 4.0) -> float:
-    """The default setting's q'' relative RMS error over hindsight's for its 0.1 s delay (1 s to the last
-    0.5 s, every sample)."""
-    t, q, _, qdd = make(kind, rate, bits, seed, seconds=seconds)
-    names = [f"j{k}" for k in range(q.shape[1])]
-    estimator = StreamingEstimator(names, settings=StreamSettings(), log=lambda level, message: None)
-    stamps = EPOCH_NS + np.round(t * 1e9).astype(np.int64)
-    found: dict[int, np.ndarray] = {}
-    for k in range(len(t)):
-        for estimate in estimator.update(int(stamps[k]), names, q[k].tolist()):
-            found[estimate.stamp_ns] = estimate.accelerations
-    evaluated = np.flatnonzero((t > 1.0) & (t < t[-1] - 0.5))
-    got = np.array([found[int(stamps[k])] for k in evaluated])
-    return relative_rms(got, qdd[evaluated]) / best(t, q, qdd, evaluated, 0.1)[0]
+    """The default setting's q'' relative RMS error over hindsight's for its 0.1 s delay."""
+    return setting_ratio(StreamSettings(), kind, rate, bits, seed, seconds)
 
 
 CASES = [

@@ -13,7 +13,6 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from neforward_ros.estimation import stream as stream_module
@@ -22,26 +21,7 @@ from neforward_ros.estimation.stream import StreamingEstimator
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
 import bench_transients
-from hindsight import best, relative_rms
-from motion_family import make
-
-EPOCH_NS = 1_700_000_000 * 10**9
-
-
-def ratio(settings: StreamSettings, kind: str, rate: float, bits: int, seed: int, seconds: float = 3.0) -> float:
-    """The setting's q'' relative RMS error over hindsight's for its delay (1 s to the last 0.5 s)."""
-    t, q, _, qdd = make(kind, rate, bits, seed, seconds=seconds)
-    names = [f"j{k}" for k in range(q.shape[1])]
-    estimator = StreamingEstimator(names, settings=settings, log=lambda level, message: None)
-    stamps = EPOCH_NS + np.round(t * 1e9).astype(np.int64)
-    found: dict[int, np.ndarray] = {}
-    for k in range(len(t)):
-        for estimate in estimator.update(int(stamps[k]), names, q[k].tolist()):
-            found[estimate.stamp_ns] = estimate.accelerations
-    evaluated = np.flatnonzero((t > 1.0) & (t < t[-1] - 0.5))
-    got = np.array([found[int(stamps[k])] for k in evaluated])
-    return relative_rms(got, qdd[evaluated]) / best(t, q, qdd, evaluated, settings.effective_lag)[0]
-
+from setting_ratio import setting_ratio
 
 FIXED_LAG = StreamSettings(method="kalman")
 CASES = [
@@ -57,7 +37,7 @@ CASES = [
 
 @pytest.mark.parametrize("case", CASES, ids=[f"{c[0]}-{c[1]:g}Hz-{c[2]}bits" for c in CASES])
 def test_the_kalman_20_ms_setting_is_within_1_5x_of_hindsight(case: tuple) -> None:
-    assert ratio(FIXED_LAG, *case) <= 1.5
+    assert setting_ratio(FIXED_LAG, *case) <= 1.5
 
 
 def test_the_bank_alone_fails_the_same_check(monkeypatch) -> None:
@@ -70,7 +50,7 @@ def test_the_bank_alone_fails_the_same_check(monkeypatch) -> None:
         self._joined, self._scores, self._models = False, None, 0
 
     monkeypatch.setattr(StreamingEstimator, "__init__", alone)
-    assert ratio(FIXED_LAG, *CASES[0]) > 1.5
+    assert setting_ratio(FIXED_LAG, *CASES[0]) > 1.5
 
 
 def transients() -> tuple[float, float]:

@@ -1,0 +1,47 @@
+"""A streaming setting's q'' error against hindsight's on a motion of the estimator benchmark's family
+(bench/motion_family.py), at seeds and rates the benchmark does not use: the tests' one measure."""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from neforward_ros.estimation.settings import StreamSettings
+from neforward_ros.estimation.stream import StreamingEstimator
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from hindsight import best, relative_rms
+from motion_family import make
+
+EPOCH_NS = 1_700_000_000 * 10**9
+
+
+def setting_ratio(
+    settings: StreamSettings,
+    kind: str,
+    rate: float,
+    bits: int,
+    seed: int,
+    seconds: float = 3.0,
+    prepare: Callable[[StreamingEstimator], None] | None = None,
+) -> float:
+    """The setting's q'' relative RMS error over hindsight's for its delay (the best fixed-window
+    polynomial whose window reaches at most that delay past the estimate, chosen knowing the truth),
+    from 1 s to the last 0.5 s, every sample. ``prepare``: called with the estimator before the first
+    message (a planted change)."""
+    t, q, _, qdd = make(kind, rate, bits, seed, seconds=seconds)
+    names = [f"j{k}" for k in range(q.shape[1])]
+    estimator = StreamingEstimator(names, settings=settings, log=lambda level, message: None)
+    if prepare is not None:
+        prepare(estimator)
+    stamps = EPOCH_NS + np.round(t * 1e9).astype(np.int64)
+    found: dict[int, np.ndarray] = {}
+    for k in range(len(t)):
+        for estimate in estimator.update(int(stamps[k]), names, q[k].tolist()):
+            found[estimate.stamp_ns] = estimate.accelerations
+    evaluated = np.flatnonzero((t > 1.0) & (t < t[-1] - 0.5))
+    got = np.array([found[int(stamps[k])] for k in evaluated])
+    return relative_rms(got, qdd[evaluated]) / best(t, q, qdd, evaluated, settings.effective_lag)[0]
