@@ -1,4 +1,6 @@
-"""The causal polyfit's window and degree, chosen per joint by how each candidate fared half a window ago.
+"""The causal polyfit's window and degree, chosen per joint by how each candidate fared half a window ago;
+and the Kalman settings' choice among the bank's models and the same fits, reaching their lag past the
+target (the stream's ``_chosen_fit``).
 
 A causal estimate refers to the newest sample: its fit is one-sided, and extrapolates to the end of
 its window. The intersection-of-confidence-intervals rule (:mod:`.adaptive`), which serves the

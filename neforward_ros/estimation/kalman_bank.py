@@ -109,6 +109,8 @@ class KalmanBank:
             scales = LENGTH_SCALES if settings.length_scale == 0 else (settings.length_scale,)
             models = MotionModels([MotionModel(_concrete(settings, scale)) for scale in scales])
         self.models = models
+        scales = np.array([model.settings.length_scale for model in models.models])
+        self._converges_after = np.maximum(SETTLE, 2.0 * scales)  # s, per model: see converged()
         self.track = KalmanTrack(models, smooth)
         self.scores: np.ndarray | None = None
         """(models, joints): the log-likelihood of each joint's samples under each model's predictions,
@@ -270,9 +272,8 @@ class KalmanBank:
         """Which models (models,) have had the samples since the start to converge from their prior by the
         target: :data:`SETTLE`, or twice the model's length scale where longer (the 0.6 s model's q'' is
         still tens of times its later error after a second's samples)."""
-        scales = np.array([model.settings.length_scale for model in self.models.models])
         since = 0.0 if self._origin is None else (target - self._origin) / NS
-        return since >= np.maximum(SETTLE, 2.0 * scales)
+        return since >= self._converges_after
 
     def _revised(self, at: int, weights: np.ndarray, smoothed: np.ndarray, variances: np.ndarray) -> np.ndarray:
         """Each joint's mean normalised revision (m,), updated with the fixed-lag estimate at ``at`` (the

@@ -5,10 +5,11 @@ estimates that message completes: in ``causal`` mode at the newest sample, in ``
 ``lag`` seconds back. Two estimators: ``polyfit``, a local polynomial fit (centred in fixed-lag mode
 with the default lag, then equal to the whole-recording estimate; one-sided in causal mode), and
 ``kalman``, a Kalman filter (causal) or fixed-lag smoother on a Gaussian-process motion model
-(:mod:`.motion`), accurate at low latency. An estimate is given only where the samples cover what
-the estimator needs (:mod:`.coverage`). Each message's fields are checked by
-:mod:`.joint_messages` and its stamp by :mod:`.timeline`; bad input never raises, it is dropped and
-logged (throttled).
+(:mod:`.motion`), accurate at low latency; with the bank of models (the default), each model is a
+candidate beside the local fits for the same delay, chosen per joint by its errors
+(:mod:`.causal_choice`). An estimate is given only where the samples cover what the estimator needs
+(:mod:`.coverage`). Each message's fields are checked by :mod:`.joint_messages` and its stamp by
+:mod:`.timeline`; bad input never raises, it is dropped and logged (throttled).
 """
 
 from __future__ import annotations
@@ -442,10 +443,7 @@ class StreamingEstimator:
             position, velocity, acceleration, spread = self._fit(target, group, exact)
             state[members, 4] = spread
         elif group.track is not None:
-            (position, velocity, acceleration), spread = group.track.estimate(target)
-            # the model's variance, scaled up by how much larger than it expects the recent innovations
-            # are (covariance matching: a model whose noise is read too low, or that lags the motion)
-            state[members, 4] = spread * np.sqrt(np.maximum(self._innovations[members], 1.0))
+            position, velocity, acceleration, state[members, 4] = self._bank_own(group, target)
         else:
             position, velocity, acceleration, spread = self._fit(target, group, exact)
             state[members, 4] = spread
@@ -458,8 +456,8 @@ class StreamingEstimator:
     def _fit(
         self, target: int, group: JointHistory, exact: bool
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """polyfit or difference over the support's samples (covered), or, for the Kalman bank in causal
-        mode, the causal fits with the bank's models among their candidates: position, velocity,
+        """polyfit or difference over the support's samples (covered), or, for the Kalman bank, the fits
+        for the same delay with the bank's models among their candidates: position, velocity,
         acceleration, and the acceleration's standard deviation (NaN where not known)."""
         settings = self.settings
         lead_ns = self._lag_ns
@@ -490,8 +488,7 @@ class StreamingEstimator:
             derivative[m:] = 1
         half, lead = settings.window / 2.0, lead_ns / NS
         if group.track is not None and values.shape[1] != m:  # (joined, between its samples: the bank's own)
-            (fitted, d1, d2), spread = group.track.estimate(target)
-            return fitted, d1, d2, spread * np.sqrt(np.maximum(self._innovations[group.joints], 1.0))
+            return self._bank_own(group, target)
         if self._scores is not None and values.shape[1] == m:  # a column per joint: scored per joint
             models = bank = None
             if group.track is not None:  # the bank's models among the candidates; its own estimate until a record
@@ -532,9 +529,20 @@ class StreamingEstimator:
         least = FLOOR * np.maximum(np.abs(values[-1]), 1.0)
         floors = variances[:, None] * least * least / np.maximum(noise, 1e-300)
         estimates = np.where(bank.converged(target)[:, None], states[:, 2], np.nan)
-        std = spread * np.sqrt(np.maximum(self._innovations[group.joints], 1.0))
+        std = self._matched(group, spread)
         own = (*_columns(mixture, by_velocity), std, np.zeros(len(std), dtype=bool))
         return (value, first, second, estimates, floors), own
+
+    def _bank_own(self, group: JointHistory, target: int) -> tuple[np.ndarray, ...]:
+        """The bank's own estimate at the target: position, velocity, acceleration and the acceleration's
+        standard deviation (m,) each (:meth:`_matched`)."""
+        (position, velocity, acceleration), spread = group.track.estimate(target)
+        return position, velocity, acceleration, self._matched(group, spread)
+
+    def _matched(self, group: JointHistory, spread: np.ndarray) -> np.ndarray:
+        """The bank's stated deviation: its models' variance, scaled up by how much larger than they expect
+        the recent innovations are (covariance matching: a noise read too low, or a model that lags)."""
+        return spread * np.sqrt(np.maximum(self._innovations[group.joints], 1.0))
 
     def _chosen_fit(
         self,
@@ -547,8 +555,9 @@ class StreamingEstimator:
         bank: tuple[np.ndarray, ...] | None = None,
         lead: float = 0.0,
     ) -> tuple[np.ndarray, ...]:
-        """The causal fit of each joint's candidate with the smallest recent error (:mod:`.causal_choice`),
-        the adaptive rule's where a joint has no record yet: value, first and second derivative, the
+        """The fit of each joint's candidate with the smallest recent error (:mod:`.causal_choice`; causal,
+        or reaching ``lead`` past the target), the adaptive rule's where a joint has no record yet: value,
+        first and second derivative, the
         estimate's standard deviation and whether it took the smallest window its degree allows (m,).
         ``models``: the Kalman bank's models as further candidates, after the fits (see
         :meth:`_model_candidates`); ``bank``: the bank's own estimate, which serves a joint without a record
