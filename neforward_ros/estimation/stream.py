@@ -688,7 +688,8 @@ class StreamingEstimator:
         """kalman: each joint's normalised innovations (about the last 50 samples), 1 on average
         when the model fits the motion and the noise. Far above, the model lags the motion (its
         length scale too long, the noise set too low); far below, it smooths less than it could.
-        Said per joint, throttled, with the parameter that would fit."""
+        Said per joint, throttled, with the parameter that would fit; where the bank's models join the
+        local fits' candidates (``_joined``), a lagging bank needs no fix: said once, as information."""
         track = group.track
         if track is None:
             return
@@ -706,6 +707,16 @@ class StreamingEstimator:
         off = (innovations > INNOVATION_LIMIT) | ((innovations < 1.0 / INNOVATION_LIMIT) & bool(settings.noise))
         for j in joints[off & (self._watched[joints] > 2 / STRAIN_MEMORY)]:
             ratio = float(self._innovations[j])
+            if ratio > INNOVATION_LIMIT and self._joined and not track.written and not settings.noise:
+                # nothing to fix: the local fits among the candidates serve where the models lag
+                self._log.once(
+                    ("estimate-fit", int(j)),
+                    logging.INFO,
+                    f"joint {self.joint_names[j]!r}: the kalman bank's fastest model ({min(LENGTH_SCALES):g} s) "
+                    "lags this motion; the local polynomial fits among its candidates, with the same delay, "
+                    "serve where they follow it better",
+                )
+                continue
             if ratio > INNOVATION_LIMIT:
                 scale = settings.length_scale or min(LENGTH_SCALES)
                 fix = (
