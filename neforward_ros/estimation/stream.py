@@ -39,8 +39,14 @@ from neforward_ros.stamps import NS
 
 STRAIN_MEMORY = 0.02
 """The weight of each new estimate in the consistency checks' averages (about the last 50)."""
+STRAIN_TIME = 1.0
+"""s: polyfit's strain share is over at least about this long (:meth:`StreamingEstimator._watch_windows`)."""
 STRAIN_LIMIT = 0.5
 """polyfit: the share of estimates at the smallest window above which a joint is said to strain."""
+REST_SPREAD = 2.0
+"""polyfit: a window whose samples spread (standard deviation) at most this many times their noise
+(read from their second differences) holds no motion: a joint at rest there, whose estimate is not
+counted as strained (its noise against a motion of zero, and nothing a higher rate would change)."""
 INNOVATION_LIMIT = 5.0
 """kalman: how far the normalised innovations may average from 1 (above or below) before it is said."""
 MEMORY_EVERY = 16
@@ -505,7 +511,7 @@ class StreamingEstimator:
             fit = adaptive_fit(times, values, target_s, half, settings.degree, lead, derivative, settings.lower_degree)
             got = _per_joint(fit, m, by_velocity, exact)
         if group.track is None:  # (the bank's joints are watched by their innovations)
-            self._watch_windows(group, got[4])
+            self._watch_windows(group, np.asarray(got[4], dtype=bool) & ~at_rest(values[:, :m]))
         return got[0], got[1], got[2], got[3]
 
     def _model_candidates(
@@ -665,11 +671,16 @@ class StreamingEstimator:
     # -- consistency --------------------------------------------------------------------------
 
     def _watch_windows(self, group: JointHistory, smallest: np.ndarray) -> None:
-        """polyfit: the share of recent estimates (about the last 50) that took the smallest window
-        the samples allow; most of them means the motion changes as fast as the samples can show,
-        and the estimate may be off by more than its stated uncertainty. Said per joint, throttled."""
+        """polyfit: the share of recent estimates (about the last 50, or the last :data:`STRAIN_TIME`
+        where that holds more) that took the smallest window the samples allow; most of them means the
+        motion changes as fast as the samples can show, and the estimate may be off by more than its
+        stated uncertainty. Said per joint, throttled. (A move's start or end strains a few tens of
+        milliseconds: at 800 Hz that is 50 estimates, and no reason to raise the rate.)"""
         joints = np.asarray(group.joints)
-        self._strain[joints] = (1.0 - STRAIN_MEMORY) * self._strain[joints] + STRAIN_MEMORY * smallest
+        weight = STRAIN_MEMORY
+        if len(group) > 8:
+            weight = min(weight, (int(group.stamps[-1]) - int(group.stamps[-9])) / (8 * NS * STRAIN_TIME))
+        self._strain[joints] = (1.0 - weight) * self._strain[joints] + weight * smallest
         self._watched[joints] += 1
         for j in joints[(self._strain[joints] > STRAIN_LIMIT) & (self._watched[joints] > 2 / STRAIN_MEMORY)]:
             self._log.every(("estimate-fit", int(j)), logging.WARNING, partial(self._strained, group, int(j)))
@@ -809,3 +820,14 @@ def _per_joint(fit: tuple[np.ndarray, ...], m: int, by_velocity: np.ndarray, exa
         for entry, whole in zip(own, rest, strict=True):
             entry[..., by_velocity] = whole[..., m:]
     return (position, velocity, acceleration, *own)
+
+
+def at_rest(values: np.ndarray) -> np.ndarray:
+    """Per column of a window's samples (T, n), whether they hold no motion: their standard deviation
+    at most :data:`REST_SPREAD` times their noise's, read from their second differences (a motion's are
+    far smaller than its spread, white noise's are sqrt(6) times its own); constant samples are at rest."""
+    if len(values) < 4:
+        return np.zeros(values.shape[1], dtype=bool)
+    noise = np.diff(values, 2, axis=0).std(axis=0) * (1.0 / math.sqrt(6.0))
+    constant = (values == values[0]).all(axis=0)  # (whose standard deviation rounds above 0)
+    return constant | (values.std(axis=0) <= REST_SPREAD * noise)
