@@ -142,7 +142,7 @@ def loopback_env(domain_id: int, config_uri: str) -> dict[str, str]:
 def stream_arm(peer: Peer, simulated, rate: float, settle: float = 0.5) -> tuple:
     """Write a simulated arm's joint states (``examples/arm_simulator.py``) on /joint_states at
     ``rate`` Hz in real time, collecting what arrives on /neforward/contact (with its arrival time)
-    and /neforward/external_torques meanwhile and for ``settle`` s after; (send times (T,),
+    and /neforward/external_torques meanwhile and for ``settle`` s after, and on while they arrive; (send times (T,),
     [(arrival, state)], [external torques' bytes])."""
     contact: list[tuple[float, bool]] = []
     external: list[bytes] = []
@@ -170,10 +170,15 @@ def stream_arm(peer: Peer, simulated, rate: float, settle: float = 0.5) -> tuple
         })  # fmt: skip
         sent[k] = time.monotonic()
         collect()
-    deadline = time.monotonic() + settle
-    while time.monotonic() < deadline:
+    # at least ``settle`` s; then until nothing has arrived for a second (a busy node runs seconds behind
+    # the stream, and answers every message it took), at most a minute
+    deadline, cap = time.monotonic() + settle, time.monotonic() + settle + 60.0
+    while time.monotonic() < min(deadline, cap):
         peer.wait(0.05)
+        before = len(contact) + len(external)
         collect()
+        if len(contact) + len(external) > before:
+            deadline = max(deadline, time.monotonic() + 1.0)
     return sent, contact, external
 
 
@@ -195,3 +200,12 @@ def processed_by(stamp: int) -> float:
 def cdr_bool(data: bytes) -> bool:
     """A std_msgs/Bool's value."""
     return bool(data[4])
+
+
+def messages_in(log: str) -> int | None:
+    """The joint states a stopped ``neforward run`` took, as its log's last line says ("stopped: N
+    messages in, M results out"); None if it did not say."""
+    for line in reversed(log.splitlines()):
+        if "stopped:" in line:
+            return int(line.split("stopped:")[1].split()[0])
+    return None

@@ -22,7 +22,7 @@ import numpy as np
 from neforward_ros.dds.loopback import write_config
 from neforward_ros.interface import topics
 
-from dds_peer import NodeProcess, Peer, loopback_env, processed_by, stream_arm
+from dds_peer import NodeProcess, Peer, loopback_env, messages_in, processed_by, stream_arm
 from test_contact import SEED, arm, arm_urdf, neforward
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
@@ -68,4 +68,7 @@ def test_contact_live_over_dds(tmp_path) -> None:
     behind_start = max(0.0, processed_by(int(pushed.stamps[push_start])) - sent[push_start])
     behind_end = max(0.0, processed_by(int(pushed.stamps[push_end])) - sent[push_end])
     assert 0 < rise < 0.5 + behind_start and 0 < fall < 0.5 + behind_end, (rise, fall, behind_start, behind_end)
-    assert len(external) >= len(pushed.stamps) - 200  # every stamp after the observer's warm-up
+    # every stamp the node took, after the observer's warm-up (all of them on an idle machine; one that
+    # runs the node over a second behind its stream drops the oldest, as its queue's depth says)
+    taken = messages_in(node.log())
+    assert taken is not None and taken > 0 and len(external) >= taken - 200, (taken, len(external), node.log())

@@ -33,6 +33,10 @@ from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr
 
 STARTUP_TIMEOUT = 30.0
+QUIET = 1.0
+"""s without a result after which, the stream sent, the node is taken to have answered all it took."""
+STRAGGLERS = 60.0
+"""s at most that the results of a stream are waited for once it is sent."""
 
 
 class _Publisher(threading.Thread):
@@ -193,17 +197,20 @@ def run_demo(
         _wait_matched([writer, *readers.values()], time.monotonic() + STARTUP_TIMEOUT, node)
         time.sleep(0.3)  # let the node's side of the matching settle too
         publisher.start()
-        end = None
-        while end is None or time.monotonic() < end:
+        end = last = None  # after the publisher: when to stop waiting; when a result last arrived
+        while end is None or time.monotonic() < min(end, last + QUIET):
             waitset.wait(duration(milliseconds=50))
             now = time.time_ns()
             for name, reader in readers.items():
                 for data in reader.take(N=256):
                     if isinstance(data, RawBytes):
                         view.add(name, cdr.decode_multi_dof(bytes(data)), now)
+                        last = time.monotonic()
             view.refresh()
             if end is None and not publisher.is_alive():
-                end = time.monotonic() + 1.0  # stragglers
+                # the stragglers: a busy node runs seconds behind its stream, and answers every message it
+                # took; until it has been quiet for QUIET (at most STRAGGLERS)
+                end, last = time.monotonic() + STRAGGLERS, time.monotonic()
     except KeyboardInterrupt:
         publisher.stop.set()
     finally:
