@@ -511,7 +511,10 @@ class StreamingEstimator:
             fit = adaptive_fit(times, values, target_s, half, settings.degree, lead, derivative, settings.lower_degree)
             got = _per_joint(fit, m, by_velocity, exact)
         if group.track is None:  # (the bank's joints are watched by their innovations)
-            self._watch_windows(group, np.asarray(got[4], dtype=bool) & ~at_rest(values[:, :m]))
+            strained = np.array(got[4], dtype=bool)
+            if strained.any():  # (a joint at rest is not: looked at only where it counts)
+                strained &= ~at_rest(values[:, :m])
+            self._watch_windows(group, strained)
         return got[0], got[1], got[2], got[3]
 
     def _model_candidates(
