@@ -462,6 +462,24 @@ def test_calibration_with_a_joint_no_recording_has_fits_the_others(recordings, t
     node_settings(found.parameters)
 
 
+def test_calibration_on_joint_states_without_velocities(recordings, tmp_path) -> None:
+    """A driver that sends positions and efforts only (many do): the node's external torques are then
+    measured - model at the estimator's stamps (the difference), and so are the calibration's. Before,
+    ``neforward calibrate`` stopped there with an AttributeError (it asked the difference's results for
+    a field they do not have)."""
+    free = recordings["free"]
+    without = replace(free, qd=np.zeros((len(free.stamps), 0)))
+    sim.write(without, arm_urdf().read_text(), tmp_path / "free")
+    done = neforward("calibrate", str(tmp_path / "free"), "-o", str(tmp_path / "params.yaml"), "--no-inertia")
+    assert done.returncode == 0, done.stderr
+    assert "external torques by the difference" in done.stdout, done.stdout
+    values = load_params_file(tmp_path / "params.yaml")
+    assert len(values["contact.thresholds"]) == 7 and all(x > 0 for x in values["contact.thresholds"])
+    warned = " ".join(line for line in done.stdout.splitlines() if line.startswith("warning"))
+    check_friction_within(values, recordings["joints"], 0.10, warned)
+    node_settings(values)
+
+
 def test_calibration_finds_the_rotors_inertia(tmp_path) -> None:
     """An arm whose motors spin rotors of 0.07-0.41 kg m^2 at the joint (armature; the simulation's
     torques are Pinocchio's rnea plus armature x qdd): the calibration finds each within 15 % and

@@ -553,7 +553,8 @@ def _external(recordings: list[Recording], options: BagOptions, raws: list[tuple
         for result, _, _ in results(model, inputs, options, [], state):
             if result is not None and result.dynamics is not None:
                 stamps = np.asarray(result.stamp_ns)
-                parts.append((result.dynamics.external, stamps, result.dynamics.qd, k, np.zeros(len(stamps), bool)))
+                dynamics = result.dynamics
+                parts.append((dynamics.external, stamps, dynamics.velocities, k, np.zeros(len(stamps), bool)))
     n = len(recordings[0].model.joint_names)
     if not parts:
         empty = np.zeros(0, np.int64)
