@@ -269,6 +269,18 @@ def test_calibration_finds_friction_within_5_percent(recordings, calibrated_urdf
     assert values["publish_torques"] is True and len(values["contact.thresholds"]) == 7
 
 
+def test_calibration_keeps_the_largest_accelerations_its_thresholds_hold_for(recordings, calibrated) -> None:
+    """``contact.accelerations``: each joint's largest |acceleration| in the free motion as the detector
+    reads it (over 20 ms of measured velocities, their noise included), against the simulator's true
+    largest |q''|: not below it (bar the 20 ms average's rounding of a peak) and within 2x (measured
+    1.24-1.64x on this arm)."""
+    values = load_params_file(calibrated["params"])
+    found = np.array(values["contact.accelerations"])
+    true = np.abs(recordings["free"].true_qdd).max(axis=0)
+    assert np.all(found >= 0.9 * true) and np.all(found <= 2.0 * true), (found, true)
+    node_settings(values)
+
+
 def test_planted_bug_friction_sign_flipped_is_caught(recordings, monkeypatch, tmp_path) -> None:
     """Friction with the wrong sign in the shared model: the calibration check must fail."""
     from neforward_ros.calibration.calibrate import calibrate

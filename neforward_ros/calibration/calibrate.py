@@ -46,6 +46,7 @@ from neforward_ros.calibration.thresholds import (
     Excursion,
     debounce_over,
     excursions,
+    largest_accelerations,
     rest_thresholds,
     robust_thresholds,
 )
@@ -119,6 +120,8 @@ class Calibration:
         before, after: each joint's external torque RMS in the free motion with the given parameters
             and with the fitted ones, N m (N).
         thresholds: each joint's contact threshold.
+        accelerations: each joint's largest |acceleration| in the free motion, which its threshold
+            holds for (:func:`.thresholds.largest_accelerations`).
         method: how the node will estimate the external torques (observer or difference).
         samples: joint states fitted on.
         notes: what could not be fitted, and why.
@@ -142,6 +145,7 @@ class Calibration:
     outliers: list[Excursion] = field(default_factory=list)
     identified: Identified | None = None
     rest_thresholds: np.ndarray | None = None
+    accelerations: np.ndarray | None = None
 
 
 def calibrate(
@@ -263,6 +267,7 @@ def calibrate(
     fitted.pop("contact.joint_names", None)
     fitted.pop("contact.thresholds", None)
     fitted.pop("contact.rest_thresholds", None)
+    fitted.pop("contact.accelerations", None)
     progress("thresholds", 0.0)
     given = {**original, "publish_torques": True}
     before = _external(recordings, _options(given, urdf, joint_states_topic), raws).external
@@ -302,6 +307,8 @@ def calibrate(
     thresholds = robust_thresholds(free.external, free.velocity, measured)
     fitted["contact.joint_names"] = [name for name, ok in zip(names, measured, strict=True) if ok]
     fitted["contact.thresholds"] = [float(f"{x:.4g}") for x, ok in zip(thresholds, measured, strict=True) if ok]
+    accelerations = largest_accelerations(_accelerations(free, names), measured)
+    fitted["contact.accelerations"] = [float(f"{x:.4g}") for x, ok in zip(accelerations, measured, strict=True) if ok]
     fitted["contact.release"] = RELEASE
     rest = _rest_thresholds(free, names, measured) if method == "observer" else None
     if rest is not None:
@@ -354,6 +361,7 @@ def calibrate(
         outliers,
         identified,
         rest,
+        accelerations,
     )
 
 
@@ -578,6 +586,17 @@ def _rest_thresholds(free: FreeMotion, names: Sequence[str], measured: np.ndarra
         detector = ContactDetector(np.full(len(names), np.inf), 0.0, tuple(names), ThrottledLog(None))
         departures[rows] = detector.rest_departures(free.stamps[rows], free.external[rows], free.still[rows])
     return rest_thresholds(departures, measured)
+
+
+def _accelerations(free: FreeMotion, names: Sequence[str]) -> np.ndarray:
+    """(T, n) the |accelerations| the node's contact detector reads in this free motion, recording by
+    recording (NaN where it reads none yet)."""
+    out = np.full(free.velocity.shape, np.nan)
+    for k in np.unique(free.recording).tolist():
+        rows = free.recording == k
+        detector = ContactDetector(np.full(len(names), np.inf), 0.0, tuple(names), ThrottledLog(None))
+        out[rows] = detector.accelerations_of(free.stamps[rows], free.velocity[rows])
+    return out
 
 
 def _rms(external: np.ndarray) -> np.ndarray:

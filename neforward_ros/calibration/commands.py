@@ -130,6 +130,13 @@ def describe(found: Calibration, output: Path) -> str:
         "three speed ranges; armature: the rotor's inertia at the joint, kg m^2 (kg), '-' where the motion did not "
         "tell it)"
     )
+    if found.accelerations is not None:
+        pairs = zip(found.joint_names, found.accelerations.tolist(), strict=True)
+        largest = [f"{n} {a:.3g}" for n, a in pairs if a == a]  # NaN: not watched
+        rows.append(
+            "largest accelerations of this motion, rad/s^2 (m/s^2) (the thresholds hold up to them, and grow in "
+            f"proportion beyond: the model was not checked there): {', '.join(largest)}"
+        )
     if found.rest_thresholds is not None:
         pairs = zip(found.joint_names, found.rest_thresholds.tolist(), strict=True)
         rest = [f"{n} {t:.3g}" for n, t in pairs if t == t]  # NaN: not watched

@@ -15,6 +15,9 @@ everything else, and a threshold set by one of them makes detection blind. So, p
   :data:`MAX_DEBOUNCE` (one sample interval more), so that what the free motion did raises no
   contact; a longer stretch over the thresholds is said (a contact during the calibration motion?).
 
+The largest |acceleration| of each joint in the free motion is kept too (``contact.accelerations``):
+beyond it the model was never checked, and the detector grows the thresholds in proportion.
+
 Where the recordings hold the arm still (every joint slower than its friction's velocity scale for
 :data:`neforward_ros.computation.contact.REST_DWELL`), the rest thresholds are measured the same way
 on what the detector's rest test watches there, the external torques' departure from their baseline
@@ -44,6 +47,10 @@ MIN_REST = 100
 """The fewest samples at rest the rest thresholds are measured on."""
 MAX_DEBOUNCE = 0.1
 """s: the longest debounce chosen to ride over the free motion's excursions."""
+ACCELERATION_QUANTILE = 0.999
+"""The quantile of |acceleration| taken as the free motion's largest (``contact.accelerations``)."""
+LEAST_ACCELERATION = 0.01
+"""rad/s^2 (m/s^2): the least ``contact.accelerations`` written (a joint the free motion never moved)."""
 
 
 @dataclass(frozen=True)
@@ -88,6 +95,19 @@ def robust_thresholds(external: np.ndarray, velocity: np.ndarray, watched: np.nd
         order = np.argsort(speeds, kind="stable")
         level = max(float(np.quantile(values[part], QUANTILE)) for part in np.array_split(order, groups))
         out[j] = max(MARGIN * level, FLOOR)
+    return out
+
+
+def largest_accelerations(accelerations: np.ndarray, watched: np.ndarray) -> np.ndarray:
+    """Per joint, the largest |acceleration| of the free motion as the contact detector reads it
+    (``accelerations`` (T, n), NaN where it reads none: :meth:`.ContactDetector.accelerations_of`),
+    rad/s^2 (m/s^2): its :data:`ACCELERATION_QUANTILE` quantile (a stamp glitch is no acceleration), at
+    least :data:`LEAST_ACCELERATION`; NaN for joints not ``watched``."""
+    out = np.full(accelerations.shape[1], np.nan)
+    for j in np.flatnonzero(watched):
+        known = accelerations[np.isfinite(accelerations[:, j]), j]
+        level = float(np.quantile(known, ACCELERATION_QUANTILE)) if len(known) else 0.0
+        out[j] = max(level, LEAST_ACCELERATION)
     return out
 
 

@@ -81,8 +81,11 @@ class ComputeState:
             rest = None
             if settings.contact_rest_thresholds:
                 rest = np.array([settings.contact_rest_thresholds.get(n, np.nan) for n in names])
+            accelerations = None
+            if settings.contact_accelerations:
+                accelerations = np.array([settings.contact_accelerations.get(n, np.nan) for n in names])
             contact = ContactDetector(
-                thresholds, settings.contact_debounce, names, throttled, settings.contact_release, rest
+                thresholds, settings.contact_debounce, names, throttled, settings.contact_release, rest, accelerations
             )
         friction = settings.friction
         effort = EffortModel.of(
@@ -216,10 +219,11 @@ def compute(
         dynamics = Dynamics(model.joint_names, q, qd, torques, external, force, moment)
         contact = None
         if state.contact is not None and state.method != "observer":
+            velocities = dynamics.velocities
             if single:
-                contact = state.contact.update(stamps, dynamics.external)
+                contact = state.contact.update(stamps, dynamics.external, velocity=velocities)
             else:
-                contact = state.contact.update_many(stamps, dynamics.external, complete)
+                contact = state.contact.update_many(stamps, dynamics.external, complete, velocity=velocities)
         result = replace(result, dynamics=dynamics, contact=contact)
     return Computed(result, rows, known_in, publish, base_unknown)
 
@@ -236,12 +240,12 @@ def observe_raw(model: RobotModel, settings: NodeSettings, raw: RawStates, state
         slack = settings.contact_static_friction * state.effort.static_friction(filtered)
         if raw.single:
             if np.isfinite(fast).any():
-                contact = state.contact.update(raw.stamps, fast, slack, bool(still))
+                contact = state.contact.update(raw.stamps, fast, slack, bool(still), raw.qd)
             else:
                 state.contact.unseen()
         else:
             usable = np.isfinite(fast).any(axis=-1)
-            contact = state.contact.update_many(raw.stamps, fast, usable, slack, still)
+            contact = state.contact.update_many(raw.stamps, fast, usable, slack, still, raw.qd)
     wrench = None
     if settings.contact_link and settings.contact_link in model.link_index:
         wrench = wrench_at_link(model, raw.q, external, settings.contact_link)

@@ -15,6 +15,17 @@ rigid model cannot follow, swings both). The detector is the computation's state
 one stamp to the next (the node holds one for its run, the bag tool one per recording), fed in
 stamp order.
 
+**Beyond the calibrated accelerations**, with ``accelerations`` (``contact.accelerations``, which
+``neforward calibrate`` measures: each joint's largest |acceleration| in its free motion, as the
+detector reads it): a model identified on a motion is not trusted beyond it. Where a joint
+accelerates faster than that (a hard stop the excitation never made), the rigid model's errors grow
+in proportion (its inertias, the effort scale that came with them), on every joint the inertia
+matrix couples to it: every moving threshold grows by the largest |acceleration| / calibrated
+largest among the joints (at least 1). The detector reads each joint's acceleration as
+the change of the velocities it is given over the last :data:`ACCELERATION_SPAN` (from the newest
+stamp at least that old: at 1 kHz, a one-sample difference would be the velocities' noise times a
+thousand), and the calibration reads its free motion the same way (:meth:`ContactDetector.accelerations_of`).
+
 **At rest**, with ``rest_thresholds`` (``contact.rest_thresholds``, which ``neforward calibrate``
 measures where its recordings hold still): once every joint has been slower than its friction's
 velocity scale for :data:`REST_DWELL`, the arm is still, and what the model cannot tell there is
@@ -30,6 +41,7 @@ The first motion ends the rest: the moving thresholds apply again.
 from __future__ import annotations
 
 import logging
+from collections import deque
 
 import numpy as np
 
@@ -39,6 +51,8 @@ from neforward_ros.stamps import NS
 REST_DWELL = 0.2
 """s every joint must have been slower than its friction's velocity scale before the rest test applies
 (a reversal passes through rest far quicker)."""
+ACCELERATION_SPAN = 0.02
+"""s over which the detector reads each joint's acceleration from the velocities' change."""
 BASELINE_TIME = 1.0
 """s: the time constant with which a still arm's baseline follows its external torques out of contact."""
 
@@ -54,6 +68,8 @@ class ContactDetector:
         release: in contact, the fraction of its threshold a joint must stay over (1: no hysteresis).
         rest_thresholds: (n,) the thresholds of the departure from the baseline while the arm is
             still, N m (N); None (or NaN for a watched joint): no rest test.
+        accelerations: (n,) the largest |acceleration| each joint's thresholds hold for, rad/s^2
+            (m/s^2); None (or NaN for a joint): at every acceleration.
     """
 
     def __init__(
@@ -64,8 +80,14 @@ class ContactDetector:
         log: ThrottledLog,
         release: float = 1.0,
         rest_thresholds: np.ndarray | None = None,
+        accelerations: np.ndarray | None = None,
     ) -> None:
         self.thresholds = np.asarray(thresholds, dtype=float)
+        self.accelerations = None
+        if accelerations is not None:
+            given = np.asarray(accelerations, dtype=float)
+            self.accelerations = np.where(np.isfinite(given) & (given > 0.0), given, np.inf)
+        self._velocities: deque[tuple[int, np.ndarray]] = deque()  # the last span's (stamp, velocities)
         self.release = float(release)
         self.watched = np.isfinite(self.thresholds)
         self.debounce_ns = round(debounce * NS)
@@ -100,6 +122,46 @@ class ContactDetector:
         """A stamp without external torques (a restart, the observer warming up): the arm may have
         moved unseen, so the rest test starts over."""
         self._still_since = self._baseline = None
+        self._velocities.clear()
+
+    def _acceleration(self, stamp_ns: int, velocity: np.ndarray) -> np.ndarray | None:
+        """Each joint's |acceleration| at this stamp, rad/s^2 (m/s^2): its velocity's change since the
+        newest stamp at least :data:`ACCELERATION_SPAN` before (see the module docstring); None until
+        the velocities given span that long."""
+        kept = self._velocities
+        if kept and stamp_ns <= kept[-1][0]:
+            kept.clear()  # (stamps back in time: a new stream)
+        kept.append((stamp_ns, np.asarray(velocity, dtype=float)))
+        span = round(ACCELERATION_SPAN * NS)
+        while len(kept) > 1 and stamp_ns - kept[1][0] >= span:
+            kept.popleft()
+        first, then = kept[0]
+        if stamp_ns - first < span:
+            return None
+        return np.abs(kept[-1][1] - then) * (NS / (stamp_ns - first))
+
+    def accelerations_of(self, stamps: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+        """(T, n) the |accelerations| the detector reads from a stream of velocities (T, n) at stamps
+        (T,), NaN where it reads none yet: what ``contact.accelerations`` is measured on."""
+        out = np.full(velocity.shape, np.nan)
+        for i, stamp in enumerate(stamps.tolist()):
+            found = self._acceleration(int(stamp), velocity[i])
+            if found is not None:
+                out[i] = found
+        return out
+
+    def growth(self, stamp_ns: int, velocity: np.ndarray | None) -> float:
+        """The factor the moving thresholds grow by at this stamp: the largest of the joints'
+        |acceleration| over its calibrated largest, at least 1 (the inertia matrix couples the joints: a
+        hard stop of one leaves its error on the others too); 1 without ``accelerations``, a velocity, or
+        a span of them yet."""
+        if self.accelerations is None or velocity is None:
+            return 1.0
+        acceleration = self._acceleration(stamp_ns, velocity)
+        if acceleration is None:
+            return 1.0
+        ratio = acceleration / self.accelerations
+        return max(1.0, float(np.max(ratio, initial=1.0, where=np.isfinite(ratio))))
 
     def _follow(self, stamp_ns: int, external: np.ndarray) -> None:
         """The baseline follows the external torques (out of contact, nothing over)."""
@@ -123,11 +185,18 @@ class ContactDetector:
         return out
 
     def update(
-        self, stamp_ns: int, external: np.ndarray, slack: np.ndarray | None = None, still: bool | None = None
+        self,
+        stamp_ns: int,
+        external: np.ndarray,
+        slack: np.ndarray | None = None,
+        still: bool | None = None,
+        velocity: np.ndarray | None = None,
     ) -> bool | None:
         """The state at this stamp, or None when no watched joint has a measured effort; ``slack``
         (n,): added to the thresholds at this stamp, out of contact; ``still``: whether every joint is
-        slower than its friction's velocity scale (None: unknown, no rest test)."""
+        slower than its friction's velocity scale (None: unknown, no rest test); ``velocity`` (n,): the
+        joint velocities, whose change grows the thresholds beyond the calibrated accelerations."""
+        grown = self.thresholds * self.growth(stamp_ns, velocity)
         measured = self.watched & np.isfinite(external)
         if not measured.any():
             self._log.once(
@@ -148,9 +217,9 @@ class ContactDetector:
         else:
             values = external
             if self.state:
-                thresholds = self.release * self.thresholds
+                thresholds = self.release * grown
             else:
-                thresholds = self.thresholds if slack is None else self.thresholds + slack
+                thresholds = grown if slack is None else grown + slack
         signed = np.where(measured, values, 0.0)
         over = measured & (np.abs(signed) > np.where(measured, thresholds, 0.0))
         now = bool(over.any())
@@ -187,10 +256,12 @@ class ContactDetector:
         usable: np.ndarray,
         slack: np.ndarray | None = None,
         still: np.ndarray | None = None,
+        velocity: np.ndarray | None = None,
     ) -> np.ndarray:
         """The states at T stamps, in order: (T,) 1.0 or 0.0, NaN where not ``usable`` (a stamp without
-        every joint's state) or no watched joint has a measured effort; ``slack`` (T, n) and ``still``
-        (T,) as for :meth:`update` (with ``still``, a stamp not ``usable`` is :meth:`unseen`)."""
+        every joint's state) or no watched joint has a measured effort; ``slack`` (T, n), ``still``
+        (T,) and ``velocity`` (T, n) as for :meth:`update` (with ``still``, a stamp not ``usable`` is
+        :meth:`unseen`)."""
         out = np.full(len(stamps), np.nan)
         for i in range(len(stamps)):
             if not usable[i]:
@@ -202,6 +273,7 @@ class ContactDetector:
                 external[i],
                 None if slack is None else slack[i],
                 None if still is None else bool(still[i]),
+                None if velocity is None else velocity[i],
             )
             out[i] = np.nan if state is None else float(state)
         return out

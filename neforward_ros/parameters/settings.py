@@ -60,6 +60,8 @@ class NodeSettings:
         contact_thresholds: joint name -> |external torque| threshold; empty: no ~/contact.
         contact_rest_thresholds: joint name -> threshold of the departure from the still arm's
             baseline (:mod:`neforward_ros.computation.contact`); empty: no rest test.
+        contact_accelerations: joint name -> the largest |acceleration| its threshold holds for, beyond
+            which it grows in proportion (rad/s^2, m/s^2); empty: at every acceleration.
         contact_debounce: s.
         contact_release: in contact, the fraction of their thresholds the joints must stay over.
         contact_static_friction: the fraction of the Coulomb friction added to the thresholds near rest.
@@ -101,6 +103,7 @@ class NodeSettings:
     wrench_links: tuple[str, ...] = ()
     contact_thresholds: Mapping[str, float] = field(default_factory=dict)
     contact_rest_thresholds: Mapping[str, float] = field(default_factory=dict)
+    contact_accelerations: Mapping[str, float] = field(default_factory=dict)
     contact_debounce: float = 0.02
     contact_release: float = 1.0
     contact_static_friction: float = 1.0
@@ -212,6 +215,9 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
     contact_rest_thresholds = {}
     if merged["contact.rest_thresholds"]:
         contact_rest_thresholds = _per_joint(merged, "contact.joint_names", "contact.rest_thresholds")
+    contact_accelerations = {}
+    if merged["contact.accelerations"]:
+        contact_accelerations = _per_joint(merged, "contact.joint_names", "contact.accelerations")
     friction = {
         field_name: _per_joint(merged, "friction.joint_names", f"friction.{field_name}", default=default)
         for field_name, default in (
@@ -249,6 +255,8 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         raise InputError("parameter contact.thresholds must hold positive numbers")
     if any(not v > 0.0 for v in contact_rest_thresholds.values()):
         raise InputError("parameter contact.rest_thresholds must hold positive numbers")
+    if any(not v > 0.0 for v in contact_accelerations.values()):
+        raise InputError("parameter contact.accelerations must hold positive numbers (rad/s^2; m/s^2)")
     if not merged["base.max_delay"] > 0.0:
         raise InputError(
             f"parameter base.max_delay must be a positive number of seconds, got {merged['base.max_delay']}"
@@ -306,6 +314,7 @@ def node_settings(values: Mapping[str, Any]) -> NodeSettings:
         wrench_links=tuple(merged["wrench_links"]),
         contact_thresholds=contact_thresholds,
         contact_rest_thresholds=contact_rest_thresholds,
+        contact_accelerations=contact_accelerations,
         contact_debounce=merged["contact.debounce"],
         contact_release=merged["contact.release"],
         contact_static_friction=merged["contact.static_friction"],

@@ -277,6 +277,14 @@ PARAMETERS: tuple[Parameter, ...] = (
         "contact.thresholds at rest too. neforward calibrate measures them where its recordings hold still.",
     ),
     Parameter(
+        "contact.accelerations",
+        "double[]",
+        [],
+        "The largest |acceleration| each joint's contact.thresholds hold for, rad/s^2 (m/s^2): beyond it (a "
+        "harder stop than the calibration's motion made), the model's errors grow and so does its threshold, by "
+        "|acceleration| / this. Empty: at every acceleration. neforward calibrate measures them.",
+    ),
+    Parameter(
         "contact.debounce", "double", 0.02, "s a change (contact or none) must last before ~/contact follows it."
     ),
     Parameter(
