@@ -20,6 +20,7 @@ from cyclonedds.util import duration
 
 from neforward_ros.dds.qos import default_qos, latched_qos
 from neforward_ros.dds.types import RawBytes, dds_type, raw_reader, raw_sample
+from neforward_ros.demo.live import stopped_counts
 from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr
 
@@ -203,9 +204,6 @@ def cdr_bool(data: bytes) -> bool:
 
 
 def messages_in(log: str) -> int | None:
-    """The joint states a stopped ``neforward run`` took, as its log's last line says ("stopped: N
-    messages in, M results out"); None if it did not say."""
-    for line in reversed(log.splitlines()):
-        if "stopped:" in line:
-            return int(line.split("stopped:")[1].split()[0])
-    return None
+    """The joint states a stopped ``neforward run`` took, as its log says; None if it did not say."""
+    counts = stopped_counts(log)
+    return None if counts is None else counts[0]

@@ -39,6 +39,16 @@ STRAGGLERS = 60.0
 """s at most that the results of a stream are waited for once it is sent."""
 
 
+def stopped_counts(log: str) -> tuple[int, int] | None:
+    """(messages in, results out) as a stopped ``neforward run`` says in its log's last such line
+    ("stopped: N messages in, M results out"); None if it did not say."""
+    for line in reversed(log.splitlines()):
+        if "stopped:" in line:
+            words = line.split("stopped:")[1].split()
+            return int(words[0]), int(words[3])
+    return None
+
+
 class _Publisher(threading.Thread):
     """Writes JointState at ``rate`` Hz on its own thread, stamped with the wall clock at writing."""
 
@@ -116,11 +126,7 @@ class DemoRun:
     @property
     def node_counts(self) -> tuple[int, int] | None:
         """(messages in, results out) as the node said when it stopped; None if it did not say."""
-        for line in reversed(self.view.node_log.splitlines()):
-            if "stopped:" in line:
-                words = line.split("stopped:")[1].split()
-                return int(words[0]), int(words[3])
-        return None
+        return stopped_counts(self.view.node_log)
 
     def exact_peaks(self) -> dict[str, np.ndarray]:
         """Per link, the peaks of |a| (kinematic), |alpha| and COM |a| at the true joint states of the
