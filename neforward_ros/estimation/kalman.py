@@ -22,9 +22,16 @@ This is the Rauch-Tung-Striebel smoother's result without its gain P_f F^T Pp^-1
 before): on nearly noise-free samples (a 20-bit encoder) Pp is too ill-conditioned (15 states) for
 that inverse, whose rounding took the 20 ms estimate's error on 0.5 Hz sines at 1 kHz through 20
 bits from 0.17 % to 0.58 % with the slowest model of the bank (to 8.5 % with a ``magnitude`` of 1).
-Each sample costs two batched products over the steps kept, of which at most :data:`UNROLLED`, the
-newest, are updated: an older step, which only a caller that never forgets keeps, stays as the
-samples up to then smoothed it.
+
+The prediction and the measurement move C_k together, C_k <- C_k A with A = F^T - F^T H^T S^-1 H Pp,
+and the mean by C_k g with g = F^T H^T S^-1 e. An estimate at a step reads only its position,
+velocity and acceleration, R x_k|N (R the read-out rows): only R C_k is kept and moved, three rows of
+fifteen, and each step's A and g. Where a target lies between two steps, the earlier step's whole
+smoothed state is worked out from them, x_k|N = x_k|k + P_k (g_k+1 + A_k+1 (g_k+2 + ...)), the same
+sums. At 1 kHz with a 20 ms lag this took a third off a bank's cost per sample (0.65-0.69 ms to
+0.45-0.48 ms, interleaved runs on a slow day; ``bench/bench_kalman.py``). Each sample moves at most
+:data:`UNROLLED` steps, the newest: an older step, which only a caller that never forgets keeps,
+stays as the samples up to then smoothed it.
 
 An estimate between two steps (a stamp whose sample was not filtered) carries the earlier step's
 smoothed state forward to it with the model; its variance is interpolated linearly in time between
@@ -69,6 +76,7 @@ class KalmanTrack:
         self.smooth = smooth
         self.steps: deque[_Step] = deque()
         self._smoothed: _Smoothed | None = None  # x_k|N, C_k and the variances of the module docstring
+        self._found: tuple[tuple[int, int, int, int], int] | None = None  # see _index()
         first = self.models.models[0].settings
         self._noise = first.noise**2
         self._velocity_noise = first.velocity_noise**2
@@ -130,7 +138,7 @@ class KalmanTrack:
         self.steps.append(_Step(stamp, state, covariance))
         if self.smooth:
             if first:
-                self._smoothed = _Smoothed(models.readout[:, 2], models.dim, len(positions))
+                self._smoothed = _Smoothed(models.readout, models.dim, len(positions))
             assert self._smoothed is not None
             self._smoothed.append(state, covariance)
         if first:
@@ -139,11 +147,16 @@ class KalmanTrack:
         return likelihood
 
     def _index(self, target: int) -> int:
-        """The newest kept step at or before the target (the oldest if none is)."""
+        """The newest kept step at or before the target (the oldest if none is); the last answer is
+        kept until the steps change (an estimate asks it three times)."""
         steps = self.steps
+        key = (target, len(steps), steps[0].stamp, steps[-1].stamp)
+        if self._found is not None and self._found[0] == key:
+            return self._found[1]
         index = len(steps) - 1
         while index > 0 and steps[index].stamp > target:
             index -= 1
+        self._found = (key, index)
         return index
 
     def estimate(self, target: int) -> np.ndarray:
@@ -152,14 +165,13 @@ class KalmanTrack:
         to the target by the model."""
         steps = self.steps
         index = self._index(target)
-        if self._smoothed is not None:
-            state = self._smoothed.mean(index)
-        else:
-            state = steps[index].filtered
-        if target > steps[index].stamp:
-            transition, _, _ = self.models.transition(interval(target, steps[index].stamp))
-            state = transition @ state
-        return self.models.readout @ state
+        step = steps[index]
+        smoothed = self._smoothed
+        if target <= step.stamp:
+            return self.models.readout @ step.filtered if smoothed is None else smoothed.mean(index)
+        state = step.filtered if smoothed is None else smoothed.state(index, step.filtered, step.covariance)
+        transition, _, _ = self.models.transition(interval(target, step.stamp))
+        return self.models.readout @ (transition @ state)
 
     def filtered_at(self, target: int) -> tuple[np.ndarray, np.ndarray] | None:
         """Where the target is the stamp of a step older than the newest and smoothing is on: each
@@ -171,9 +183,7 @@ class KalmanTrack:
         index = self._index(target)
         if index == len(steps) - 1 or steps[index].stamp != target:
             return None
-        row = self.models.readout[:, 2]  # (models, dim)
-        step = steps[index]
-        return np.einsum("md,mdj->mj", row, step.filtered), _acceleration_variance(row, step.covariance)
+        return self._smoothed.filtered(index)
 
     def acceleration_variance(self, target: int) -> np.ndarray:
         """Each model's variance of the acceleration :meth:`estimate` gives at the target (models,), the
@@ -222,64 +232,111 @@ def _acceleration_variance(row: np.ndarray, covariance: np.ndarray) -> np.ndarra
     return np.einsum("md,mde,me->m", row, covariance, row)
 
 
+_PER_STEP = ("means", "rows", "variances", "filtered_accelerations", "filtered_variances", "moves", "pushes")
+"""The per-step buffers of :class:`_Smoothed` (means and rows: 3 rows a step)."""
+
+
 class _Smoothed:
-    """x_k|N (models, dim, m), C_k (models, dim, dim) and the acceleration's variance (models,) of the
-    module docstring for the steps kept, in buffers that grow by doubling: the steps are rows start ..
-    end - 1, oldest first; the newest :data:`UNROLLED` of them are updated by each sample."""
+    """For the steps kept (rows start .. end - 1, oldest first, in buffers that grow by doubling): the
+    read-outs R x_k|N (models, rows * 3, m) of the smoothed states, R C_k (models, rows * 3, dim), and
+    the acceleration's variance (models, rows); and each step's move of the older ones, A_j and g_j
+    (the module docstring), from which :meth:`state` works out a step's whole smoothed state. The
+    newest :data:`UNROLLED` steps are updated by each sample."""
 
-    def __init__(self, acceleration_row: np.ndarray, dim: int, joints: int, capacity: int = 32) -> None:
-        self.row = acceleration_row  # (models, dim)
-        models = len(acceleration_row)
-        self.means = np.zeros((models, capacity, dim, joints))
-        self.cross = np.zeros((models, capacity, dim, dim))
+    def __init__(self, readout: np.ndarray, dim: int, joints: int, capacity: int = 32) -> None:
+        self.readout = readout  # R (models, 3, dim): position, velocity and acceleration
+        models = len(readout)
+        self.dim = dim
+        self.joints = joints
+        self.means = np.zeros((models, capacity * 3, joints))
+        self.rows = np.zeros((models, capacity * 3, dim))
         self.variances = np.zeros((models, capacity))
+        self.filtered_accelerations = np.zeros((models, capacity, joints))  # r x_k|k
+        self.filtered_variances = np.zeros((models, capacity))  # r P_k r^T
+        self.moves = np.zeros((models, capacity, dim, dim))  # A_j, stored with step j
+        self.pushes = np.zeros((models, capacity, dim, joints))  # g_j
         self.start = self.end = 0
+        self._transposed: np.ndarray | None = None  # F^T of the prediction the next measurement completes
+        self._move: tuple[np.ndarray, np.ndarray] | None = None  # (A, g) of the newest measurement
 
-    def _live(self) -> slice:
-        return slice(max(self.start, self.end - UNROLLED), self.end)
+    def _first_live(self) -> int:
+        return max(self.start, self.end - UNROLLED)
 
     def predict(self, transposed: np.ndarray) -> None:
-        """The newest state moves on by F ((models, dim, dim) F^T given): C_k becomes C_k F^T."""
-        live = self._live()
-        models, _, dim, _ = self.cross.shape
-        cross = self.cross[:, live].reshape(models, -1, dim)
-        self.cross[:, live] = (cross @ transposed).reshape(models, -1, dim, dim)
+        """The newest state moves on by F ((models, dim, dim) F^T given): C_k becomes C_k F^T, applied
+        with the measurement that follows (:meth:`measure`)."""
+        self._transposed = transposed
 
     def measure(self, rows: np.ndarray, inverse: np.ndarray, projected: np.ndarray, innovation: np.ndarray) -> None:
         """The newest sample's measurement: rows H (models, p, dim), S^-1 (models, p, p), H Pp (models,
-        p, dim) and the innovation (models, p, m) move every live step (the module docstring)."""
-        live = self._live()
-        models, _, dim, joints = self.means.shape
-        cross = self.cross[:, live].reshape(models, -1, dim)  # (models, kept * dim, dim)
-        told = cross @ rows.transpose(0, 2, 1)  # C_k H^T (models, kept * dim, p)
-        weights = told @ inverse  # C_k H^T S^-1
-        self.means[:, live] += (weights @ innovation).reshape(models, -1, dim, joints)
-        self.cross[:, live] -= (weights @ projected).reshape(models, -1, dim, dim)
-        kept = self.end - live.start
-        told = told.reshape(models, kept, dim, -1)
-        acceleration = np.einsum("md,mkdp->mkp", self.row, told)  # r C_k H^T (models, kept, p)
-        self.variances[:, live] -= np.add.reduce(acceleration * (acceleration @ inverse), axis=2)
+        p, dim) and the innovation (models, p, m) move every live step (the module docstring), after
+        the prediction :meth:`predict` was given; its A and g are kept with the step that follows."""
+        transposed = self._transposed
+        assert transposed is not None, "a measurement follows a prediction"
+        self._transposed = None
+        measured = transposed @ rows.transpose(0, 2, 1)  # F^T H^T (models, dim, p)
+        move = transposed - (measured @ inverse) @ projected  # A
+        push = measured @ (inverse @ innovation)  # g (models, dim, m)
+        self._move = (move, push)
+        live = slice(3 * self._first_live(), 3 * self.end)
+        read = self.rows[:, live]  # R C_k (models, kept * 3, dim)
+        self.means[:, live] += read @ push
+        told = read[:, 2::3] @ measured  # r C_k F^T H^T (models, kept, p)
+        self.rows[:, live] = read @ move
+        kept = told.shape[1]
+        self.variances[:, self.end - kept : self.end] -= np.add.reduce(told * (told @ inverse), axis=2)
 
     def append(self, state: np.ndarray, covariance: np.ndarray) -> None:
-        """A new newest step: its filtered state and covariance."""
-        if self.end == self.means.shape[1]:
+        """A new newest step: its filtered state (models, dim, m) and covariance (models, dim, dim)."""
+        capacity = self.variances.shape[1]
+        if self.end == capacity:
             kept = self.end - self.start
-            if 2 * kept > self.means.shape[1]:
-                self.means = np.concatenate([self.means, np.zeros_like(self.means)], axis=1)
-                self.cross = np.concatenate([self.cross, np.zeros_like(self.cross)], axis=1)
-                self.variances = np.concatenate([self.variances, np.zeros_like(self.variances)], axis=1)
-            self.means[:, :kept] = self.means[:, self.start : self.end]
-            self.cross[:, :kept] = self.cross[:, self.start : self.end]
-            self.variances[:, :kept] = self.variances[:, self.start : self.end]
+            if 2 * kept > capacity:
+                for name in _PER_STEP:
+                    array = getattr(self, name)
+                    setattr(self, name, np.concatenate([array, np.zeros_like(array)], axis=1))
+            for name in _PER_STEP:
+                array, per = getattr(self, name), 3 if name in ("means", "rows") else 1
+                array[:, : kept * per] = array[:, self.start * per : self.end * per]
             self.start, self.end = 0, kept
-        self.means[:, self.end] = state
-        self.cross[:, self.end] = covariance
-        self.variances[:, self.end] = _acceleration_variance(self.row, covariance)
+        readout = self.readout
+        rows = slice(3 * self.end, 3 * self.end + 3)
+        means = readout @ state
+        self.means[:, rows] = means
+        read = readout @ covariance
+        self.rows[:, rows] = read
+        variance = np.einsum("md,md->m", read[:, 2], readout[:, 2])
+        self.variances[:, self.end] = variance
+        self.filtered_accelerations[:, self.end] = means[:, 2]
+        self.filtered_variances[:, self.end] = variance
+        if self._move is not None:
+            self.moves[:, self.end], self.pushes[:, self.end] = self._move
+            self._move = None
         self.end += 1
 
     def mean(self, index: int) -> np.ndarray:
-        """The smoothed state (models, dim, m) of the step ``index`` among those kept."""
-        return self.means[:, self.start + index]
+        """The smoothed read-outs R x_k|N (models, 3, m) of the step ``index`` among those kept."""
+        first = 3 * (self.start + index)
+        return self.means[:, first : first + 3]
+
+    def filtered(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """The filtered acceleration (models, m) and its variance (models,) of the step ``index`` among
+        those kept, as the step's own sample left them."""
+        at = self.start + index
+        return self.filtered_accelerations[:, at], self.filtered_variances[:, at]
+
+    def state(self, index: int, filtered: np.ndarray, covariance: np.ndarray) -> np.ndarray:
+        """The whole smoothed state (models, dim, m) of the step ``index`` among those kept, given its
+        filtered state and covariance P_k: x_k|k + P_k (g_k+1 + A_k+1 (g_k+2 + A_k+2 (...))), over the
+        samples that updated it (the module docstring)."""
+        at = self.start + index
+        last = min(self.end - 1, at + UNROLLED)
+        if last <= at:
+            return filtered
+        total = self.pushes[:, last]
+        for j in range(last - 1, at, -1):
+            total = self.pushes[:, j] + self.moves[:, j] @ total
+        return filtered + covariance @ total
 
     def variance(self, index: int) -> np.ndarray:
         """The smoothed acceleration variance (models,) of the step ``index``, at least 0 (sums of many
@@ -291,9 +348,16 @@ class _Smoothed:
         self.start += count
 
     def select(self, columns: list[int]) -> _Smoothed:
-        smoothed = _Smoothed(self.row, self.cross.shape[2], len(columns), self.means.shape[1])
+        smoothed = _Smoothed(self.readout, self.dim, len(columns), self.variances.shape[1])
         smoothed.means = self.means[..., columns]
-        smoothed.cross = self.cross.copy()
+        smoothed.pushes = self.pushes[..., columns]
+        smoothed.rows = self.rows.copy()
         smoothed.variances = self.variances.copy()
+        smoothed.moves = self.moves.copy()
+        smoothed.filtered_accelerations = self.filtered_accelerations[..., columns]
+        smoothed.filtered_variances = self.filtered_variances.copy()
         smoothed.start, smoothed.end = self.start, self.end
+        smoothed._transposed = self._transposed
+        if self._move is not None:
+            smoothed._move = (self._move[0], self._move[1][..., columns])
         return smoothed
