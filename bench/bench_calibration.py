@@ -9,9 +9,11 @@ theirs on every joint, with no contact reported.
 UR10e (motor currents): ``neforward calibrate`` on the three unloaded 50 s excitation runs (default
 options; with ``--gains``, the drive gains of the README given as effort scales), then ``neforward
 bag --params`` on every other recording: the contact episodes each reports (free motion: none;
-``push_pose_1``: the arm held still and pushed by hand).
+``push_pose_1``: the arm held still and pushed by hand). With ``--leave-one-out``: three
+calibrations, each on two of the three runs, then the held-out run (a free motion the calibration did
+not see, as a user's other recordings are: no contact wanted) and ``push_pose_1`` (its four pushes).
 
-Usage: python bench/bench_calibration.py [--realdata ../shared/realdata] [--gains]
+Usage: python bench/bench_calibration.py [--realdata ../shared/realdata] [--gains] [--leave-one-out]
 """
 
 from __future__ import annotations
@@ -138,11 +140,29 @@ def ur10e(realdata: Path, folder: Path, gains: bool) -> None:
         print(f"{recording.name:<28} {len(found)} contact episode(s) {spans}")
 
 
+def ur10e_held_out(realdata: Path, folder: Path) -> None:
+    """Calibrate on two of the three excitation runs (default options), then the third and push_pose_1."""
+    urdf = realdata / "ur10e.urdf"
+    for held in UR_CALIBRATION:
+        params = folder / f"ur-without-{held}.yaml"
+        used = [r for r in UR_CALIBRATION if r != held]
+        neforward("calibrate", *(str(realdata / r) for r in used), "--urdf", str(urdf), "-o", str(params))
+        for recording in (held, "ur-20_01_22-push_pose_1"):
+            report = neforward("bag", str(realdata / recording), "--urdf", str(urdf), "--params", str(params), "-o",
+                               str(folder / f"out-{held}-{recording}"))  # fmt: skip
+            found = contacts(report)
+            spans = "; ".join(line.removeprefix("contact: from ").split(" (")[0] for line in found)
+            print(f"calibrated without {held:<26} {recording:<26} {len(found)} contact episode(s) {spans}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--realdata", default=str(Path(__file__).resolve().parents[2] / "shared" / "realdata"))
     parser.add_argument("--gains", action="store_true", help="give the UR10e's drive gains as effort scales")
     parser.add_argument("--only", choices=("panda", "ur10e"))
+    parser.add_argument(
+        "--leave-one-out", action="store_true", help="UR10e: calibrate on two excitation runs, check the third"
+    )
     parser.add_argument(
         "--keep", metavar="DIR", help="write the recordings and params here (an empty folder) and keep them"
     )
@@ -153,6 +173,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(args.keep) if args.keep else Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
+        if args.leave_one_out:
+            ur10e_held_out(realdata, folder)
+            return
         if args.only in (None, "panda"):
             panda(realdata, folder)
         if args.only in (None, "ur10e"):
