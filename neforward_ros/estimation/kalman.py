@@ -232,8 +232,9 @@ def _acceleration_variance(row: np.ndarray, covariance: np.ndarray) -> np.ndarra
     return np.einsum("md,mde,me->m", row, covariance, row)
 
 
-_PER_STEP = ("means", "rows", "variances", "filtered_accelerations", "filtered_variances", "moves", "pushes")
-"""The per-step buffers of :class:`_Smoothed` (means and rows: 3 rows a step)."""
+_PER_STEP = {"means": 3, "rows": 3, "variances": 1, "filtered_accelerations": 1, "filtered_variances": 1, "moves": 1,
+             "pushes": 1}  # fmt: skip
+"""The per-step buffers of :class:`_Smoothed`, each with its rows a step along its second axis."""
 
 
 class _Smoothed:
@@ -247,7 +248,6 @@ class _Smoothed:
         self.readout = readout  # R (models, 3, dim): position, velocity and acceleration
         models = len(readout)
         self.dim = dim
-        self.joints = joints
         self.means = np.zeros((models, capacity * 3, joints))
         self.rows = np.zeros((models, capacity * 3, dim))
         self.variances = np.zeros((models, capacity))
@@ -295,8 +295,8 @@ class _Smoothed:
                 for name in _PER_STEP:
                     array = getattr(self, name)
                     setattr(self, name, np.concatenate([array, np.zeros_like(array)], axis=1))
-            for name in _PER_STEP:
-                array, per = getattr(self, name), 3 if name in ("means", "rows") else 1
+            for name, per in _PER_STEP.items():
+                array = getattr(self, name)
                 array[:, : kept * per] = array[:, self.start * per : self.end * per]
             self.start, self.end = 0, kept
         readout = self.readout
