@@ -11,6 +11,8 @@ import pytest
 TEST_DIR = Path(__file__).resolve().parent
 URDF_DIR = TEST_DIR / "urdf"
 CONFIG_DIR = TEST_DIR.parent / "config"
+EPOCH_NS = 1_700_000_000 * 10**9
+"""A wall-clock epoch (2023-11-14, integer ns) that the tests' stamps start from, as a driver's would."""
 
 TEST_ROBOTS = {
     "planar_2r": URDF_DIR / "planar_2r.urdf",

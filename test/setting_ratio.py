@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from hindsight import best, relative_rms
 from motion_family import make
 
-EPOCH_NS = 1_700_000_000 * 10**9
+from conftest import EPOCH_NS
 
 
 def setting_ratio(

@@ -16,11 +16,10 @@ from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr
 from neforward_ros.wire.rostypes import typestore
 
-from conftest import CONFIG_DIR
+from conftest import CONFIG_DIR, EPOCH_NS
 from oracle import PinocchioOracle
 
 PANDA = CONFIG_DIR / "panda.urdf"
-EPOCH = 1_700_000_000 * 10**9
 FREQUENCIES = np.linspace(0.3, 1.2, 8)
 AMPLITUDES = np.array([0.5, 0.4, 0.5, 0.4, 0.5, 0.4, 0.5, 0.01])  # the last is the finger (prismatic, m)
 NAMES = [f"panda_joint{k}" for k in range(1, 8)] + ["panda_finger_joint1"]
@@ -49,25 +48,25 @@ def record(path, *, seconds=4.0, velocities=False, storage=StoragePlugin.MCAP, d
         joint_states = writer.add_connection("/joint_states", topics.JOINT_STATE_TYPE, typestore=store)
         if description:
             connection = writer.add_connection("/robot_description", topics.STRING_TYPE, typestore=store)
-            writer.write(connection, EPOCH, cdr.encode(topics.STRING_TYPE, {"data": PANDA.read_text()}))
+            writer.write(connection, EPOCH_NS, cdr.encode(topics.STRING_TYPE, {"data": PANDA.read_text()}))
         for topic, kind in extra.get("other_topics", []):
             writer.add_connection(topic, kind, typestore=store)
         names = extra.get("names", NAMES[:-1] if extra.get("without_finger") else NAMES)
         strays = extra.get("strays", {})
         for run in range(runs):  # concatenated runs: stamps go back at each new run
             for k in range(count):
-                stamp = EPOCH + round(t[k] * 1e9)
+                stamp = EPOCH_NS + round(t[k] * 1e9)
                 if k in strays:  # a malformed message first: (stamp, names, positions)
                     stray_stamp, stray_names, stray_positions = strays[k](stamp)
                     stray = {"header": {"stamp": time_message(stray_stamp)}, "name": stray_names,
                              "position": stray_positions}  # fmt: skip
                     writer.write(
-                        joint_states, EPOCH + round(t[k] * 1e9) - 1, cdr.encode(topics.JOINT_STATE_TYPE, stray)
+                        joint_states, EPOCH_NS + round(t[k] * 1e9) - 1, cdr.encode(topics.JOINT_STATE_TYPE, stray)
                     )
                 contents = {"header": {"stamp": time_message(stamp)}, "name": names, "position": q[k].tolist()}
                 if velocities:
                     contents["velocity"] = qd[k].tolist()
-                log_time = EPOCH + run * 10**10 + round(t[k] * 1e9)
+                log_time = EPOCH_NS + run * 10**10 + round(t[k] * 1e9)
                 writer.write(joint_states, log_time, cdr.encode(topics.JOINT_STATE_TYPE, contents))
     return t
 
@@ -98,7 +97,7 @@ def check_against_pinocchio(link_states: list, com_states: list) -> None:
     got, want, got_com, want_com, got_alpha, want_alpha = [], [], [], [], [], []
     for (_, raw), (_, raw_com) in list(zip(link_states, com_states, strict=True))[::25]:
         point, com = cdr.decode_multi_dof(raw), cdr.decode_multi_dof(raw_com)
-        tk = (point.stamp_ns - EPOCH) / 1e9
+        tk = (point.stamp_ns - EPOCH_NS) / 1e9
         q, qd, qdd = (x[0] for x in trajectory(np.array([tk])))
         expected = oracle.kinematics(model.joint_names, model.link_names, q, qd, qdd)
         rotation = expected["rotation"]
@@ -123,7 +122,7 @@ def test_outputs_match_pinocchio_on_the_analytic_trajectory(tmp_path, storage, v
     out = read_output(tmp_path / "out")
     assert set(out) == {"/neforward/link_states", "/neforward/com_states", "/neforward/panda_hand/imu"}
     stamps = [cdr.decode_multi_dof(raw).stamp_ns for _, raw in out["/neforward/link_states"]]
-    assert stamps == (EPOCH + np.round(t[covered(t)] * 1e9).astype(np.int64)).tolist()
+    assert stamps == (EPOCH_NS + np.round(t[covered(t)] * 1e9).astype(np.int64)).tolist()
     check_against_pinocchio(out["/neforward/link_states"], out["/neforward/com_states"])
     log_time, raw = out["/neforward/panda_hand/imu"][0]
     imu = typestore().deserialize_cdr(raw, topics.IMU_TYPE)
@@ -139,7 +138,7 @@ def test_batched_messages_equal_the_node_message_building(tmp_path) -> None:
     model = load_model(PANDA)
     t = np.linspace(0.0, 1.0, 7)
     q, qd, qdd = trajectory(t)
-    stamps = EPOCH + np.round(t * 1e9).astype(np.int64)
+    stamps = EPOCH_NS + np.round(t * 1e9).astype(np.int64)
     batch = make_result(model, stamps, kinematics_table(model, q, qd, qdd, root_state()))
     _ = batch.blocks  # computed for the batch: its samples take their numbers from it
     for builder, blocks in (
@@ -215,7 +214,7 @@ def test_no_output_whose_window_reaches_into_a_gap(tmp_path) -> None:
     stamps = np.array(
         [cdr.decode_multi_dof(raw).stamp_ns for _, raw in read_output(tmp_path / "out")["/neforward/link_states"]]
     )
-    out = (stamps - EPOCH) / 1e9
+    out = (stamps - EPOCH_NS) / 1e9
     last_before, first_after = t[t < 1.5].max(), t[t >= 1.5].min()
     before, after = out[out < 1.5], out[out >= 1.5]
     # the 0.1 s either side of each output lies within the samples, give or take 1.5 sample intervals
@@ -249,7 +248,7 @@ def bad_cases(tmp_path):
     record(tmp_path / "no_js", seconds=0.1, description=True, names=NAMES, other_topics=[])
     with Writer(tmp_path / "only_other", version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         connection = writer.add_connection("/odom_text", topics.STRING_TYPE, typestore=typestore())
-        writer.write(connection, EPOCH, cdr.encode(topics.STRING_TYPE, {"data": "x"}))
+        writer.write(connection, EPOCH_NS, cdr.encode(topics.STRING_TYPE, {"data": "x"}))
     record(tmp_path / "missing_joint", seconds=0.2, names=[*NAMES[:-1], "not_the_finger"])
     record(tmp_path / "corrupt", seconds=1.0)
     storage = next((tmp_path / "corrupt").glob("*.mcap"))

@@ -14,9 +14,8 @@ from neforward_ros.node.pipeline import Pipeline
 from neforward_ros.parameters.settings import node_settings
 from neforward_ros.rotations import quaternions
 
-from conftest import TEST_ROBOTS, LogRecorder
+from conftest import EPOCH_NS, TEST_ROBOTS, LogRecorder
 
-STAMP = 1_700_000_000 * 10**9
 GRAVITY = np.array([0.0, 0.0, -9.81])
 PATH = TEST_ROBOTS["humanoid"]
 MODEL = load_model(PATH)
@@ -93,7 +92,7 @@ def run(pipeline: Pipeline, seconds: float = 2.0, source: str = "imu", skip=None
     results = []
     names = list(MODEL.joint_names)
     for t, kind, k in sorted(events):
-        stamp = STAMP + round(t * 1e9)
+        stamp = EPOCH_NS + round(t * 1e9)
         if kind == 0:
             results += pipeline.on_joint_state(stamp, names, q[k].tolist())
         elif skip is None or not skip(t):
@@ -105,7 +104,7 @@ def run(pipeline: Pipeline, seconds: float = 2.0, source: str = "imu", skip=None
 
 
 def truth_at(stamps_ns: np.ndarray):
-    t = (stamps_ns - STAMP) / 1e9
+    t = (stamps_ns - EPOCH_NS) / 1e9
     r, p, w, al, v, f = base_truth(t)
     base = BaseMotion(omega=w, alpha=al, specific_force=f, velocity=v)
     return forward_recursion(MODEL, *joints(t), base=base), r, p
@@ -160,7 +159,7 @@ def test_a_virtual_imu_fed_back_as_the_base_imu_gives_the_same_outputs() -> None
     imu = {r.stamp_ns: dict(first.messages(r))[f"~/{head}/imu"] for r in results}
     again = []
     for k, t in enumerate(t_joint):
-        stamp = STAMP + round(t * 1e9)
+        stamp = EPOCH_NS + round(t * 1e9)
         again += second.on_joint_state(stamp, names, q_all[k].tolist())
         if stamp in imu:
             m = imu[stamp]
@@ -185,27 +184,27 @@ def test_missing_late_nan_and_out_of_order_base_messages() -> None:
     q, _, _ = joints(np.arange(500) / 500.0)
     out = []
     for k in range(500):
-        out += pipeline.on_joint_state(STAMP + k * 2_000_000, names, q[k].tolist())
+        out += pipeline.on_joint_state(EPOCH_NS + k * 2_000_000, names, q[k].tolist())
     assert out == [] and log.count("no base motion at its stamp") >= 1
     # a 0.4 s stretch without base messages: the stamps it covers are dropped, the rest published
     pipeline = Pipeline(node_settings(settings), log=log)
     results = run(pipeline, seconds=3.0, skip=lambda t: 1.0 <= t < 1.4)
-    t = (np.array([r.stamp_ns for r in results]) - STAMP) / 1e9
+    t = (np.array([r.stamp_ns for r in results]) - EPOCH_NS) / 1e9
     assert ((t > 0.3) & (t < 0.9)).sum() > 250 and ((t > 1.7) & (t < 2.8)).sum() > 500
     assert not ((t > 1.05) & (t < 1.35)).any()
     kin, _, _ = truth_at(np.array([r.stamp_ns for r in results]))
     assert relative(np.array([r.in_link.accel for r in results]), kin.accel) <= 1e-2
     # NaN and stamps going back: dropped or restarted, logged, never raised
     pipeline = Pipeline(node_settings(settings), log=log)
-    assert pipeline.on_base(BaseMessage(STAMP, MODEL.root_link, [np.nan, 0, 0], [0, 0, 9.81], None)) == []
+    assert pipeline.on_base(BaseMessage(EPOCH_NS, MODEL.root_link, [np.nan, 0, 0], [0, 0, 9.81], None)) == []
     assert log.count("non-finite") >= 1
     for k in range(3):  # a stream in line
-        pipeline.on_base(BaseMessage(STAMP + 10**9 + k * 10**7, MODEL.root_link, [0, 0, 0], [0, 0, 9.81], None))
-    pipeline.on_base(BaseMessage(STAMP, MODEL.root_link, [0, 0, 0], [0, 0, 9.81], None))  # one stray
-    pipeline.on_base(BaseMessage(STAMP + 10**9 + 3 * 10**7, MODEL.root_link, [0, 0, 0], [0, 0, 9.81], None))
+        pipeline.on_base(BaseMessage(EPOCH_NS + 10**9 + k * 10**7, MODEL.root_link, [0, 0, 0], [0, 0, 9.81], None))
+    pipeline.on_base(BaseMessage(EPOCH_NS, MODEL.root_link, [0, 0, 0], [0, 0, 9.81], None))  # one stray
+    pipeline.on_base(BaseMessage(EPOCH_NS + 10**9 + 3 * 10**7, MODEL.root_link, [0, 0, 0], [0, 0, 9.81], None))
     assert log.count("which went on without them: dropped") == 1 and log.count("went back in time") == 0
     for k in range(3):  # the stream goes on from an earlier time: a reset
-        pipeline.on_base(BaseMessage(STAMP + k * 10**7, MODEL.root_link, [0, 0, 0], [0, 0, 9.81], None))
+        pipeline.on_base(BaseMessage(EPOCH_NS + k * 10**7, MODEL.root_link, [0, 0, 0], [0, 0, 9.81], None))
     assert log.count("went back in time") == 1
 
 

@@ -27,13 +27,12 @@ from neforward_ros.interface import topics
 from neforward_ros.stamps import time_message
 from neforward_ros.wire import cdr, rostypes
 
-from conftest import CONFIG_DIR
+from conftest import CONFIG_DIR, EPOCH_NS
 from dds_peer import NodeProcess, Peer, joint_state, loopback_env
 
 PANDA = CONFIG_DIR / "panda.urdf"
 MODEL = load_model(PANDA)
 NAMES = list(MODEL.joint_names)
-EPOCH = 1_700_000_000 * 10**9
 STARTUP = 30.0
 _DOMAINS = itertools.count(random.randint(100, 150))
 
@@ -86,7 +85,7 @@ def collect(peer: Peer, received: dict[str, list[bytes]], until, timeout: float 
             received[topic] += peer.take(topic)
 
 
-def still_states(q: np.ndarray, count: int, start_ns: int = EPOCH, step_ns: int = 10_000_000) -> list[dict]:
+def still_states(q: np.ndarray, count: int, start_ns: int = EPOCH_NS, step_ns: int = 10_000_000) -> list[dict]:
     return [joint_state(start_ns + k * step_ns, NAMES, q.tolist()) for k in range(count)]
 
 
@@ -135,7 +134,7 @@ def test_link_states_accel_and_imu_match_forward_recursion(start, domain) -> Non
         assert len(received[topic]) == 20, topic
     check_still_outputs(received[OUTPUTS[0]][-1], received[OUTPUTS[1]][-1], received[OUTPUTS[2]][-1], q)
     stamps = [cdr.decode_multi_dof(b).stamp_ns for b in received[OUTPUTS[0]]]
-    assert stamps == [EPOCH + k * 10_000_000 for k in range(20, 40)]  # each output has its input's stamp
+    assert stamps == [EPOCH_NS + k * 10_000_000 for k in range(20, 40)]  # each output has its input's stamp
     assert "no estimate yet for joint(s)" in node.log()  # the warm-up, said once
 
 
@@ -146,7 +145,7 @@ def test_a_joint_nobody_publishes_leaves_out_only_the_links_it_moves(start, doma
     peer.wait_connected(node)
     names = [name for name in NAMES if name != "panda_finger_joint1"]
     q = np.linspace(-0.5, 0.5, len(names))
-    states = [joint_state(EPOCH + k * 10_000_000, names, q.tolist()) for k in range(40)]
+    states = [joint_state(EPOCH_NS + k * 10_000_000, names, q.tolist()) for k in range(40)]
     received = stream(peer, states, rate=100.0, topics=OUTPUTS)
     collect(peer, received, lambda r: len(r[OUTPUTS[0]]) >= 20 and len(r[OUTPUTS[1]]) >= 20)
     arm = tuple(name for name in MODEL.link_names if "finger" not in name)
@@ -173,14 +172,14 @@ def test_supplied_states_give_exact_kinematics_over_the_wire(start, domain) -> N
     q, qd, qdd = (rng.uniform(-2, 2, len(NAMES)) for _ in range(3))
     point = {"positions": q.tolist(), "velocities": qd.tolist(), "accelerations": qdd.tolist()}
     peer.write(
-        "/joint_states_accel", {"header": {"stamp": time_message(EPOCH)}, "joint_names": NAMES, "points": [point]}
+        "/joint_states_accel", {"header": {"stamp": time_message(EPOCH_NS)}, "joint_names": NAMES, "points": [point]}
     )
     received = {"/neforward/link_states": [], "/neforward/com_states": []}
     collect(peer, received, lambda r: all(r.values()))
     expected = forward_recursion(MODEL, q, qd, qdd).in_root()
     links = cdr.decode_multi_dof(received["/neforward/link_states"][0])
     coms = cdr.decode_multi_dof(received["/neforward/com_states"][0])
-    assert links.stamp_ns == EPOCH
+    assert links.stamp_ns == EPOCH_NS
     np.testing.assert_allclose(links.velocities[:, 3:], expected.omega, rtol=0, atol=1e-9)
     np.testing.assert_allclose(links.velocities[:, :3], expected.velocity, rtol=0, atol=1e-9)
     np.testing.assert_allclose(links.accelerations[:, :3], expected.accel, rtol=0, atol=1e-9)
@@ -202,7 +201,7 @@ def test_model_from_the_transient_local_topic_after_the_node_started(start, doma
     while "model 'panda'" not in node.log() and time.monotonic() < deadline:
         time.sleep(0.05)
     assert description.get_publication_matched_status().current_count == 1
-    received = stream(peer, still_states(q, 30, start_ns=EPOCH + 10**9), rate=100.0, topics=OUTPUTS)
+    received = stream(peer, still_states(q, 30, start_ns=EPOCH_NS + 10**9), rate=100.0, topics=OUTPUTS)
     collect(peer, received, lambda r: all(len(v) >= 8 for v in r.values()))
     check_still_outputs(received[OUTPUTS[0]][-1], received[OUTPUTS[1]][-1], received[OUTPUTS[2]][-1], q)
     log = node.log()
@@ -221,7 +220,7 @@ def test_node_restart_mid_stream(start, domain) -> None:
     peer.wait_disconnected()
     second = start("--urdf", str(PANDA), "--ros-args", *PER_LINK)
     peer.wait_connected(second)
-    after = stream(peer, still_states(q, 30, start_ns=EPOCH + 10**9), rate=100.0, topics=OUTPUTS)
+    after = stream(peer, still_states(q, 30, start_ns=EPOCH_NS + 10**9), rate=100.0, topics=OUTPUTS)
     collect(peer, after, lambda r: all(len(v) >= 10 for v in r.values()))
     assert len(after[OUTPUTS[0]]) == 10  # a new node warms up again: 0.2 s of samples
     check_still_outputs(after[OUTPUTS[0]][-1], after[OUTPUTS[1]][-1], after[OUTPUTS[2]][-1], q)
@@ -232,7 +231,7 @@ def test_bad_input_over_the_wire_then_good_input_is_still_right(start, domain) -
     peer = peer_for_outputs(domain)
     peer.wait_connected(node)
     q = np.full(len(NAMES), 0.4)
-    t = EPOCH + 5 * 10**9
+    t = EPOCH_NS + 5 * 10**9
     bad = [
         joint_state(t, NAMES, [0.1, 0.2]),  # names and positions of different lengths
         joint_state(t + 10**7, NAMES, [float("nan")] * len(NAMES)),  # NaN
@@ -269,7 +268,7 @@ def test_200_hz_for_5_s_loses_no_output(start, domain) -> None:
     peer.wait_connected(node)
     times = np.arange(1000) / 200.0
     q = 0.5 * np.sin(np.outer(times, np.linspace(1.0, 3.0, len(NAMES))))
-    states = [joint_state(EPOCH + round(t * 1e9), NAMES, row.tolist()) for t, row in zip(times, q, strict=True)]
+    states = [joint_state(EPOCH_NS + round(t * 1e9), NAMES, row.tolist()) for t, row in zip(times, q, strict=True)]
     received = stream(peer, states, rate=200.0, topics=["/neforward/link_states"])
     collect(peer, received, lambda r: len(r["/neforward/link_states"]) >= 960, timeout=60.0)
     stamps = [cdr.decode_multi_dof(b).stamp_ns for b in received["/neforward/link_states"]]
@@ -369,7 +368,7 @@ def test_echo_prints_yaml_like_ros2_topic_echo(start, config_uri, domain) -> Non
     try:
         time.sleep(3.0)  # the echo process discovers the node
         q = np.zeros(len(NAMES))
-        stream(peer, still_states(q, 300, start_ns=EPOCH), rate=100.0)
+        stream(peer, still_states(q, 300, start_ns=EPOCH_NS), rate=100.0)
         out, err = echo.communicate(timeout=60)
     finally:
         echo.kill()
@@ -426,9 +425,9 @@ def test_a_base_imu_moves_the_quadruped(start, domain) -> None:
     k = model.link_index["imu_link"]
     received = {"/neforward/link_states": []}
     for i in range(len(t)):
-        peer.write("/joint_states", joint_state(EPOCH + round(t[i] * 1e9), list(model.joint_names), q[i].tolist()))
+        peer.write("/joint_states", joint_state(EPOCH_NS + round(t[i] * 1e9), list(model.joint_names), q[i].tolist()))
         imu = {
-            "header": {"stamp": time_message(EPOCH + round(t_imu[i] * 1e9)), "frame_id": "imu_link"},
+            "header": {"stamp": time_message(EPOCH_NS + round(t_imu[i] * 1e9)), "frame_id": "imu_link"},
             "orientation_covariance": [-1.0] + [0.0] * 8,  # no orientation
             "angular_velocity": dict(zip("xyz", kin.omega[i, k].tolist(), strict=True)),
             "linear_acceleration": dict(zip("xyz", kin.accel[i, k].tolist(), strict=True)),
@@ -439,7 +438,7 @@ def test_a_base_imu_moves_the_quadruped(start, domain) -> None:
     collect(peer, received, lambda r: len(r["/neforward/link_states"]) >= 200, timeout=60.0)
     points = [cdr.decode_multi_dof(b) for b in received["/neforward/link_states"]]
     assert len(points) >= 200
-    stamps = (np.array([p.stamp_ns for p in points]) - EPOCH) / 1e9
+    stamps = (np.array([p.stamp_ns for p in points]) - EPOCH_NS) / 1e9
     truth = forward_recursion(
         model, *example.legs(stamps, model.joint_names), base=example.trunk_motion(stamps)
     ).in_root()
@@ -468,7 +467,7 @@ def test_malformed_messages_mixed_into_a_good_stream_cost_no_good_output(start, 
     count, rate = 1000, 200.0
     t = (np.arange(count) + np.random.default_rng(5).uniform(-0.1, 0.1, count)) / rate
     q, qd, _ = trajectory(t)
-    stamps = [EPOCH + round(x * 1e9) for x in t]
+    stamps = [EPOCH_NS + round(x * 1e9) for x in t]
     good = [joint_state(s, NAMES, q[k].tolist(), qd[k].tolist()) | {"effort": [0.5] * 8} for k, s in enumerate(stamps)]
     nan = float("nan")
     bad = {  # before good message k

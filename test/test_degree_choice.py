@@ -23,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from motion_family import make
 from setting_ratio import setting_ratio
 
-EPOCH_NS = 1_700_000_000 * 10**9
+from conftest import EPOCH_NS
 
 
 def default_ratio(kind: str, rate: float, bits: int, seed: int, seconds: float = 4.0) -> float:

@@ -16,9 +16,8 @@ from neforward_ros.estimation.estimate import JointEstimate
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
 
-from conftest import LogRecorder, jittered_stamps, reference, relative_rms
+from conftest import EPOCH_NS, LogRecorder, jittered_stamps, reference, relative_rms
 
-EPOCH_NS = 1_700_000_000 * 10**9
 NAMES = ("a", "b")
 
 

@@ -17,9 +17,8 @@ from neforward_ros.estimation.motion import ORDER, TREND_JERK, KalmanSettings, M
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
 
-from conftest import LogRecorder, reference
+from conftest import EPOCH_NS, LogRecorder, reference
 
-EPOCH_NS = 1_700_000_000 * 10**9
 SHIFTS = (0.0, 0.8, 1.6, 2.4)  # four joints: the reference signal, phase-shifted
 
 SETTINGS = {

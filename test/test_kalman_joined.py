@@ -25,7 +25,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
 import bench_transients
 import numpy as np
 from motion_family import make
-from setting_ratio import EPOCH_NS, setting_ratio
+from setting_ratio import setting_ratio
+
+from conftest import EPOCH_NS
 
 FIXED_LAG = StreamSettings(method="kalman")
 CASES = [

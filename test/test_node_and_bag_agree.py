@@ -27,7 +27,8 @@ from neforward_ros.wire.rostypes import deserialize, typestore
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "examples"))
 from quadruped_trot import URDF, legs, trunk_motion, trunk_pose
 
-EPOCH = 1_700_000_000 * 10**9
+from conftest import EPOCH_NS
+
 PARAMETERS = {
     "base.source": "imu",
     "world_frame": "world",
@@ -70,11 +71,11 @@ def recording(tmp_path_factory) -> Path:
     events = sorted([(x, 0, i) for i, x in enumerate(t)] + [(x, 1, i) for i, x in enumerate(t_imu)])
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         description = writer.add_connection("/robot_description", topics.STRING_TYPE, typestore=store)
-        writer.write(description, EPOCH, cdr.encode(topics.STRING_TYPE, {"data": URDF.read_text()}))
+        writer.write(description, EPOCH_NS, cdr.encode(topics.STRING_TYPE, {"data": URDF.read_text()}))
         joint_states = writer.add_connection("/joint_states", topics.JOINT_STATE_TYPE, typestore=store)
         imu = writer.add_connection("/imu", topics.IMU_TYPE, typestore=store)
         for x, kind, i in events:
-            stamp = EPOCH + round(x * 1e9)
+            stamp = EPOCH_NS + round(x * 1e9)
             if kind == 0:
                 contents = {"header": {"stamp": time_message(stamp)}, "name": names, "position": q[i].tolist(),
                             "velocity": qd[i].tolist(), "effort": efforts[i].tolist()}  # fmt: skip

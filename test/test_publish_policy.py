@@ -12,11 +12,10 @@ from neforward_ros import forward_recursion, load_model
 from neforward_ros.node.pipeline import Pipeline
 from neforward_ros.parameters.settings import node_settings
 
-from conftest import CONFIG_DIR, TEST_DIR, assert_close
+from conftest import CONFIG_DIR, EPOCH_NS, TEST_DIR, assert_close
 
 PANDA = CONFIG_DIR / "panda.urdf"
 MODEL = load_model(PANDA)
-STAMP = 1_700_000_000 * 10**9
 FINGER = "panda_finger_joint1"
 ARM = [name for name in MODEL.link_names if "finger" not in name]  # the links the finger joint does not move
 
@@ -36,7 +35,7 @@ def feed(pipeline: Pipeline, seconds: float, names=None, start: float = 0.0, rat
     q, _, _ = trajectory(t)
     results = []
     for k in range(len(t)):
-        stamp = STAMP + round(t[k] * 1e9)
+        stamp = EPOCH_NS + round(t[k] * 1e9)
         results += pipeline.on_joint_state(stamp, names, q[k, columns].tolist())
     return results
 
@@ -58,7 +57,7 @@ def pipeline_with(**parameters) -> Pipeline:
 def check_links(result, q_override=None) -> None:
     """The result's links against the recursion at the true state (the finger at q_override if given,
     at rest)."""
-    t = np.array([(result.stamp_ns - STAMP) / 1e9])
+    t = np.array([(result.stamp_ns - EPOCH_NS) / 1e9])
     q, qd, qdd = (x[0] for x in trajectory(t))
     if q_override is not None:
         j = MODEL.joint_index[FINGER]
@@ -115,7 +114,7 @@ def test_a_joint_falling_silent_and_coming_back() -> None:
     names = [name for name in MODEL.joint_names if name != FINGER]
     results += feed(pipeline, 1.0, names, start=1.0)
     results += feed(pipeline, 1.0, start=2.0)
-    t = np.array([(r.stamp_ns - STAMP) / 1e9 for r in results])
+    t = np.array([(r.stamp_ns - EPOCH_NS) / 1e9 for r in results])
     full = np.array([r.link_names == MODEL.link_names for r in results])
     arm_only = np.array([list(r.link_names) == ARM for r in results])
     assert np.all(full | arm_only)
@@ -132,7 +131,7 @@ def test_a_model_reload_warms_up_again() -> None:
     assert before
     assert pipeline.set_description(PANDA.read_text())
     after = feed(pipeline, 0.5, start=0.5)
-    t = np.array([(r.stamp_ns - STAMP) / 1e9 for r in after])
+    t = np.array([(r.stamp_ns - EPOCH_NS) / 1e9 for r in after])
     assert t.min() >= 0.5 + 0.2 - 1e-9  # nothing until the new estimator's 0.2 s window is covered
 
 
@@ -147,7 +146,7 @@ def test_the_node_guide_says_what_the_arrays_hold_in_the_partial_case() -> None:
 @pytest.mark.parametrize("policy", ["partial", "hold"])
 def test_the_bag_tool_applies_the_same_policy(tmp_path, policy) -> None:
     pytest.importorskip("rosbags")
-    from test_bag import EPOCH, read_output, record
+    from test_bag import read_output, record
 
     from neforward_ros.cli import main
     from neforward_ros.wire import cdr
@@ -162,7 +161,7 @@ def test_the_bag_tool_applies_the_same_policy(tmp_path, policy) -> None:
     assert len(points) > 300
     # a joint never in the recording is held under every policy (a driver that does not send it)
     assert all(list(p.joint_names) == list(MODEL.link_names) for p in points)
-    assert points[0].stamp_ns >= EPOCH + 100_000_000  # no estimate before the window is covered
+    assert points[0].stamp_ns >= EPOCH_NS + 100_000_000  # no estimate before the window is covered
     header, *rows = (tmp_path / "out.csv").read_text().splitlines()
     column = header.split(",").index("panda_leftfinger.accel_in_root.z[m/s^2]")
     cells = {row.split(",")[column] for row in rows}

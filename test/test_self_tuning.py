@@ -28,9 +28,7 @@ from neforward_ros.estimation.motion import KalmanSettings
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
 
-from conftest import CONFIG_DIR, LogRecorder
-
-EPOCH_NS = 1_700_000_000 * 10**9
+from conftest import CONFIG_DIR, EPOCH_NS, LogRecorder
 
 
 def chirp(t: np.ndarray, top: float, shift: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

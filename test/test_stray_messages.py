@@ -14,9 +14,8 @@ from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
 from neforward_ros.estimation.timeline import CONFIRM
 
-from conftest import LogRecorder, jittered_stamps, reference
+from conftest import EPOCH_NS, LogRecorder, jittered_stamps, reference
 
-EPOCH_NS = 1_700_000_000 * 10**9
 NAMES = ("a", "b", "c")
 
 

@@ -12,12 +12,11 @@ from neforward_ros import inverse_dynamics, load_model
 from neforward_ros.node.pipeline import Pipeline, TrajectoryPoint
 from neforward_ros.parameters.settings import node_settings
 
-from conftest import CONFIG_DIR
+from conftest import CONFIG_DIR, EPOCH_NS
 from oracle import GRAVITY, pin
 
 PANDA = CONFIG_DIR / "panda.urdf"
 MODEL = load_model(PANDA)
-STAMP = 1_700_000_000 * 10**9
 PAYLOAD_MASS = 2.0
 PAYLOAD_AT = np.array([0.0, 0.0, 0.1])  # in the hand's frame
 
@@ -85,7 +84,7 @@ def test_external_torques_are_the_payloads_jacobian_transpose_wrench_and_zero_wi
     )
     for seed in range(5):
         q, qd, qdd = random_state(seed)
-        (result,) = supplied(pipeline, STAMP + seed, q, qd, qdd, loaded.efforts(q, qd, qdd))
+        (result,) = supplied(pipeline, EPOCH_NS + seed, q, qd, qdd, loaded.efforts(q, qd, qdd))
         expected = loaded.jacobian_transpose_wrench(q, qd, qdd)
         np.testing.assert_allclose(
             result.dynamics.external, expected, rtol=0, atol=1e-6 * max(1, np.abs(expected).max())
@@ -102,7 +101,8 @@ def test_external_torques_are_the_payloads_jacobian_transpose_wrench_and_zero_wi
         )
         assert contents["~/joint_torques"]["name"] == list(MODEL.joint_names)
         # the efforts of the arm without the payload: nothing external
-        (bare,) = supplied(pipeline, STAMP + 100 + seed, q, qd, qdd, inverse_dynamics(MODEL, q, qd, qdd).joint_torque)
+        bare_torque = inverse_dynamics(MODEL, q, qd, qdd).joint_torque
+        (bare,) = supplied(pipeline, EPOCH_NS + 100 + seed, q, qd, qdd, bare_torque)
         assert np.abs(bare.dynamics.external).max() <= 1e-9
 
 
@@ -125,7 +125,7 @@ def test_effort_scale_and_offset_are_applied_before_the_difference() -> None:
     raw = model_torque.copy()
     raw[1] = (model_torque[1] - 0.5) / 2.0  # so that 2 * raw + 0.5 is the model's torque
     raw[3] = -model_torque[3]
-    (result,) = supplied(pipeline, STAMP, q, qd, qdd, raw)
+    (result,) = supplied(pipeline, EPOCH_NS, q, qd, qdd, raw)
     assert np.abs(result.dynamics.external).max() <= 1e-9
 
 
@@ -141,7 +141,7 @@ def test_wrench_messages_are_the_joint_wrenches_in_the_link_frame() -> None:
         )
     )
     q, qd, qdd = random_state(3)
-    (result,) = supplied(pipeline, STAMP, q, qd, qdd, [])
+    (result,) = supplied(pipeline, EPOCH_NS, q, qd, qdd, [])
     contents = dict(pipeline.messages(result))
     expected = inverse_dynamics(MODEL, q, qd, qdd)
     for link in ("panda_link4", "panda_hand"):
@@ -188,8 +188,8 @@ def test_contact_turns_on_when_a_payload_is_grasped_and_off_when_released_with_d
         effort = (
             loaded.efforts(q[i], qd[i], qdd[i]) if held else inverse_dynamics(MODEL, q[i], qd[i], qdd[i]).joint_torque
         )
-        states += pipeline.on_joint_state(STAMP + round(t[i] * 1e9), names, q[i].tolist(), [], effort.tolist())
-    stamps = np.array([(r.stamp_ns - STAMP) / 1e9 for r in states])
+        states += pipeline.on_joint_state(EPOCH_NS + round(t[i] * 1e9), names, q[i].tolist(), [], effort.tolist())
+    stamps = np.array([(r.stamp_ns - EPOCH_NS) / 1e9 for r in states])
     contact = np.array([r.contact for r in states])
     assert contact[(stamps > 0.2) & (stamps < 1.0)].sum() == 0
     assert contact[(stamps > 1.1) & (stamps < 1.95)].all()

@@ -17,7 +17,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 from bench_write_jitter import error
 from motion_family import gait, sines
 
-EPOCH_NS = 1_700_000_000 * 10**9
+from conftest import EPOCH_NS
 
 
 @pytest.mark.parametrize("delay", [0.1, 0.4, 0.7])
