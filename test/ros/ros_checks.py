@@ -16,8 +16,9 @@ import numpy as np
 from neforward_ros import forward_recursion, load_model
 from neforward_ros.model import JointKind, RobotModel
 
+from conftest import EPOCH_NS
+
 NS = 1_000_000_000
-EPOCH_NS = 1_700_000_000 * NS
 
 
 def moving_plan(model: RobotModel, **options) -> dict:
