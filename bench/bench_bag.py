@@ -33,6 +33,9 @@ from pathlib import Path
 import numpy as np
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from motion_family import EPOCH_NS
+
 from neforward_ros import load_model
 from neforward_ros.bag import BagOptions, process_bag
 from neforward_ros.interface import topics
@@ -55,7 +58,7 @@ def make_recording(path: Path, seconds: float) -> int:
     with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         connection = writer.add_connection("/joint_states", topics.JOINT_STATE_TYPE, typestore=store)
         for k in range(count):
-            stamp = 1_700_000_000 * 10**9 + round(t[k] * 1e9)
+            stamp = EPOCH_NS + round(t[k] * 1e9)
             contents = {"header": {"stamp": time_message(stamp)}, "name": names, "position": q[k].tolist()}
             writer.write(connection, stamp, cdr.encode(topics.JOINT_STATE_TYPE, contents))
     return count
@@ -109,9 +112,9 @@ def check_accelerations(recording: Path, output: Path, seconds: float) -> float:
         for connection, _, raw in reader.messages(connections=connections):
             message = store.deserialize_cdr(raw, connection.msgtype)
             t = message.header.stamp.sec + message.header.stamp.nanosec * 1e-9
-            if t < 1_700_000_000 + 0.9 * seconds:
+            if t < EPOCH_NS / 1e9 + 0.9 * seconds:
                 continue
-            stamps.append(t - 1_700_000_000)
+            stamps.append(t - EPOCH_NS / 1e9)
             accels.append([[a.linear.x, a.linear.y, a.linear.z] for a in message.points[0].accelerations])
     t = np.asarray(stamps)
     w = np.linspace(1.0, 4.0, len(model.joint_names))

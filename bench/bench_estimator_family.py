@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from hindsight import best, relative_rms
-from motion_family import KINDS, make, repeated
+from motion_family import EPOCH_NS, KINDS, make, repeated
 
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
@@ -60,7 +60,7 @@ def run(t: np.ndarray, q: np.ndarray, settings: StreamSettings) -> tuple[np.ndar
     """(sample index, accelerations, their stated standard deviations (NaN: none), cost per message)."""
     names = [f"j{k}" for k in range(q.shape[1])]
     estimator = StreamingEstimator(names, settings=settings)
-    stamps = (t * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
+    stamps = (t * 1e9).astype(np.int64) + EPOCH_NS
     out: dict[int, tuple[np.ndarray, np.ndarray]] = {}
     unknown = np.full(q.shape[1], np.nan)
     started = time.perf_counter()

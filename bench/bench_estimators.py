@@ -23,10 +23,15 @@ Usage: python bench/bench_estimators.py [--seconds 8] [--plot docs/estimators.pn
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from motion_family import EPOCH_NS
 
 from neforward_ros.estimation.motion import KalmanSettings
 from neforward_ros.estimation.settings import StreamSettings
@@ -36,7 +41,6 @@ AMPLITUDE = np.array([0.8, 0.3, 0.05])
 FREQUENCY = np.array([0.2, 0.7, 1.6])
 PHASE = np.array([0.3, 1.1, 2.0])
 JOINTS = 8
-EPOCH_NS = 1_700_000_000 * 10**9
 GAP_START, GAP_LENGTH = 4.0, 0.3
 
 

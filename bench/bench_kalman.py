@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from motion_family import make
+from motion_family import EPOCH_NS, make
 
 from neforward_ros.estimation.kalman_bank import KalmanBank
 from neforward_ros.estimation.motion import KalmanSettings
@@ -53,7 +53,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
     t, q, _, _ = make("sines1.5", 1000, 16, 3, args.seconds, joints=7)
-    stamps = (t * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
+    stamps = (t * 1e9).astype(np.int64) + EPOCH_NS
     cases = {
         "peer": lambda: stream_cost(q, stamps, StreamSettings()),
         "lag bank": lambda: bank_cost(t, q, stamps, 20),

@@ -15,10 +15,14 @@ Usage: python bench/bench_stream.py [--seconds 10]
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from motion_family import EPOCH_NS
 
 from neforward_ros import forward_recursion, load_model
 from neforward_ros.estimation import native_fit
@@ -53,7 +57,7 @@ def main() -> None:
     count = int(args.seconds * 500)
     rng = np.random.default_rng(0)
     t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
-    stamps = 1_700_000_000 * 10**9 + np.round(t * 1e9).astype(np.int64)
+    stamps = EPOCH_NS + np.round(t * 1e9).astype(np.int64)
     q, _ = reference(t, shifts)
 
     zeros = np.zeros(len(names))

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from motion_family import make
+from motion_family import EPOCH_NS, make
 
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
@@ -42,7 +42,7 @@ TARGET = 3.0
 def run(settings: StreamSettings, kind: str, seed: int) -> tuple[float, list[float], int]:
     t, q, _, qdd = make(kind, RATE, BITS, seed, SECONDS, joints=JOINTS)
     keep = ~((t >= GAP[0]) & (t < GAP[1]))
-    stamps = (t * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
+    stamps = (t * 1e9).astype(np.int64) + EPOCH_NS
     stamps[t >= RESET_AT] -= int(RESET_BY * 1e9)
     names = [f"j{k}" for k in range(JOINTS)]
     estimator = StreamingEstimator(names, settings=settings)

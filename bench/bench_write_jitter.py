@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_transients import SETTINGS  # every documented setting
-from motion_family import gait, min_jerk, sines
+from motion_family import EPOCH_NS, gait, min_jerk, sines
 
 from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
@@ -45,7 +45,7 @@ def estimates(stamps_s: np.ndarray, q: np.ndarray, settings: StreamSettings):
     a time: the estimates every joint of which is ready."""
     names = [f"j{k}" for k in range(q.shape[1])]
     estimator = StreamingEstimator(names, settings=settings, log=lambda level, message: None)
-    stamps = (stamps_s * 1e9).astype(np.int64) + 1_700_000_000 * 10**9
+    stamps = (stamps_s * 1e9).astype(np.int64) + EPOCH_NS
     out: dict[int, np.ndarray] = {}
     for k in range(len(stamps)):
         for estimate in estimator.update(int(stamps[k]), names, q[k].tolist()):

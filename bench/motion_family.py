@@ -14,6 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
+EPOCH_NS = 1_700_000_000 * 10**9
+"""ns: the benchmarks' stamps count from here (a date in 2023: an epoch, not zero, as drivers stamp)."""
+
 KINDS = ("sines0.5", "sines1.5", "sines3", "sines5", "minjerk", "trapezoid", "gait")
 
 

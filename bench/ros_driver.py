@@ -105,6 +105,7 @@ def echo(arguments: argparse.Namespace) -> None:
 
 def serialization(arguments: argparse.Namespace) -> None:
     import numpy as np
+    from motion_family import EPOCH_NS
     from rclpy.serialization import serialize_message
     from rosidl_runtime_py.set_message import set_message_fields
 
@@ -117,7 +118,7 @@ def serialization(arguments: argparse.Namespace) -> None:
     model = load_model(arguments.urdf)
     n = len(model.joint_names)
     q = np.linspace(-0.5, 0.5, n)
-    result = make_result(model, 1_700_000_000 * NS, kinematics_table(model, q, q, q, root_state()))
+    result = make_result(model, EPOCH_NS, kinematics_table(model, q, q, q, root_state()))
 
     def typed() -> bytes:  # set_message_fields consumes its contents: both paths build them anew
         message = MultiDOFJointTrajectory()

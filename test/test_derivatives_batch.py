@@ -8,7 +8,7 @@ import pytest
 from neforward_ros import InputError
 from neforward_ros.estimation.batch import estimate_derivatives
 
-from conftest import jittered_stamps, reference, relative_rms
+from conftest import EPOCH_NS, jittered_stamps, reference, relative_rms
 
 INTERIOR = slice(100, -100)  # 0.2 s from either end
 
@@ -56,7 +56,7 @@ def test_epoch_sized_stamps_keep_their_precision() -> None:
     t = jittered_stamps(2000)
     q, _, qdd_true = reference(t)
     _, qdd_relative = estimate_derivatives(t, q)
-    epoch_ns = np.int64(1_700_000_000) * 10**9 + np.round(t * 1e9).astype(np.int64)
+    epoch_ns = np.int64(EPOCH_NS) + np.round(t * 1e9).astype(np.int64)
     _, qdd_ns = estimate_derivatives(epoch_ns, q)
     # only the rounding of t to whole ns differs: on noise-free samples it is the only noise there is,
     # and the noise read on the stamps sees it, so the windows chosen may differ; both are as close to

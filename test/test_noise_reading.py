@@ -19,6 +19,8 @@ from bench_write_jitter import error
 from hindsight import best
 from motion_family import make, sines
 
+from conftest import EPOCH_NS
+
 
 def test_divided_differences_vanish_on_quintics_and_are_the_sixth_difference_on_even_stamps() -> None:
     rng = np.random.default_rng(3)
@@ -271,7 +273,7 @@ def _kalman_rms_z(mode: str, t: np.ndarray, q: np.ndarray, acceleration) -> floa
     estimator, on samples q (T, 3) at t (s), against the true q'' ``acceleration(times)``, over the
     estimates after the first second and before the last half."""
     names = ["a", "b", "c"]
-    stamps = 1_700_000_000 * 10**9 + np.round(t * 1e9).astype(np.int64)
+    stamps = EPOCH_NS + np.round(t * 1e9).astype(np.int64)
     estimator = StreamingEstimator(names, settings=StreamSettings(method="kalman", mode=mode),
                                    log=lambda level, message: None)  # fmt: skip
     found = []

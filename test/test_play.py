@@ -18,7 +18,7 @@ from neforward_ros.dds.loopback import write_config
 from neforward_ros.interface import topics
 from neforward_ros.wire import cdr
 
-from conftest import CONFIG_DIR
+from conftest import CONFIG_DIR, EPOCH_NS
 from dds_peer import NodeProcess, Peer, loopback_env
 
 _DOMAINS = itertools.count(random.randint(160, 200))
@@ -84,7 +84,7 @@ def test_play_a_recording_into_the_node(config_uri, tmp_path) -> None:
         assert out == int(covered(t).sum()), (out, int(covered(t).sum()))
     # the recording's stamps, unchanged
     stamps = {p.stamp_ns for p in received}
-    recorded = {1_700_000_000 * 10**9 + round(x * 1e9) for x in t}
+    recorded = {EPOCH_NS + round(x * 1e9) for x in t}
     assert stamps <= recorded
     # played at twice the speed: about 1 s, after the 2 s delay (the only bound above: a generous one)
     assert 2.9 < duration < 120.0
