@@ -1,8 +1,12 @@
 """The Kalman bank's cost per message: 7 joints at 1 kHz (a 1.5 Hz motion, 16-bit encoder, +-5 %
 jitter), the bank alone (add, estimate a lag back, spread) and the whole ``StreamingEstimator.update``,
-with a 20 ms lag and causal; the default polyfit's update on the same stream, in the same run, as the
-peer. Each cost is measured --repeats times, interleaved; printed: the median and the range (a shared
-machine's load lands on single repeats). Target (issue 26): at most 0.3 ms a message for the bank.
+with a 20 ms lag and causal; the default polyfit's update on the same stream as the peer.
+
+The three advance side by side, message by message, each message's calls in a rotating order and
+timed one by one: a shared machine's speed drifts within seconds (the same code read 0.30 and 0.45 ms
+a message in back-to-back runs), and so each ratio to the peer is of the same moments. Each setting
+is run --repeats times; printed: the median and the range of the costs, and of the ratios. Target
+(issue 26): at most 0.3 ms a message for the bank.
 
 Usage: python bench/bench_kalman.py [--seconds 3] [--repeats 5]
 """
@@ -25,26 +29,38 @@ from neforward_ros.estimation.settings import StreamSettings
 from neforward_ros.estimation.stream import StreamingEstimator
 
 
-def bank_cost(t: np.ndarray, q: np.ndarray, stamps: np.ndarray, lag: int) -> float:
+def side_by_side(q: np.ndarray, stamps: np.ndarray, lag: int) -> dict[str, float]:
+    """ms a message of the bank alone (KalmanBank: add, estimate ``lag`` samples back, forget before it),
+    of the whole kalman update and of the peer's (polyfit, the default) on the same messages, fed in
+    turn, the order rotating from message to message."""
+    names = [f"j{k}" for k in range(q.shape[1])]
+    mode = "fixed_lag" if lag else "causal"
     bank = KalmanBank(KalmanSettings(), smooth=lag > 0)
+    whole = StreamingEstimator(names, settings=StreamSettings(method="kalman", mode=mode), log=lambda *_: None)
+    peer = StreamingEstimator(names, settings=StreamSettings(), log=lambda *_: None)
     missing = np.full(q.shape[1], np.nan)
-    started = time.perf_counter()
-    for k in range(len(t)):
+    rows = q.tolist()
+
+    def run_bank(k: int) -> None:
         bank.add(int(stamps[k]), q[k], missing)
         target = int(stamps[max(k - lag, 0)])
         bank.estimate(target)  # and its spread
         bank.forget_before(target)
-    return (time.perf_counter() - started) / len(t)
 
-
-def stream_cost(q: np.ndarray, stamps: np.ndarray, settings: StreamSettings) -> float:
-    names = [f"j{k}" for k in range(q.shape[1])]
-    estimator = StreamingEstimator(names, settings=settings, log=lambda level, message: None)
-    rows = q.tolist()
-    started = time.perf_counter()
+    calls = {
+        "bank": run_bank,
+        "whole": lambda k: whole.update(int(stamps[k]), names, rows[k]),
+        "peer": lambda k: peer.update(int(stamps[k]), names, rows[k]),
+    }
+    order = list(calls)
+    spent = dict.fromkeys(calls, 0.0)
+    clock = time.perf_counter
     for k in range(len(stamps)):
-        estimator.update(int(stamps[k]), names, rows[k])
-    return (time.perf_counter() - started) / len(stamps)
+        for name in order[k % 3 :] + order[: k % 3]:
+            started = clock()
+            calls[name](k)
+            spent[name] += clock() - started
+    return {name: seconds / len(stamps) * 1e3 for name, seconds in spent.items()}
 
 
 def main() -> None:
@@ -54,33 +70,23 @@ def main() -> None:
     args = parser.parse_args()
     t, q, _, _ = make("sines1.5", 1000, 16, 3, args.seconds, joints=7)
     stamps = (t * 1e9).astype(np.int64) + EPOCH_NS
-    cases = {
-        "peer": lambda: stream_cost(q, stamps, StreamSettings()),
-        "lag bank": lambda: bank_cost(t, q, stamps, 20),
-        "lag whole": lambda: stream_cost(q, stamps, StreamSettings(method="kalman")),
-        "causal bank": lambda: bank_cost(t, q, stamps, 0),
-        "causal whole": lambda: stream_cost(q, stamps, StreamSettings(method="kalman", mode="causal")),
-    }
-    costs: dict[str, list[float]] = {name: [] for name in cases}
-    for _ in range(args.repeats):
-        for name, run in cases.items():
-            costs[name].append(run() * 1e3)
+    print(f"7 joints at 1 kHz, {len(t)} messages, {args.repeats} repeats, the bank, the whole update and the "
+          "peer (polyfit's update, the default) side by side")  # fmt: skip
 
-    def said(name: str) -> str:
-        values = costs[name]
-        return f"{np.median(values):.3f} ms a message (repeats {min(values):.3f}-{max(values):.3f})"
+    def said(values: list[float], unit: str) -> str:
+        return f"{np.median(values):.3f}{unit} (repeats {min(values):.3f}-{max(values):.3f})"
 
-    peer = float(np.median(costs["peer"]))
-    print(f"7 joints at 1 kHz, {len(t)} messages, {args.repeats} repeats; the peer, polyfit's update (default): "
-          f"{said('peer')}")  # fmt: skip
-    for label, key in (("kalman fixed_lag (20 ms)", "lag"), ("kalman causal", "causal")):
-        bank = costs[f"{key} bank"]
+    for label, lag in (("kalman fixed_lag (20 ms)", 20), ("kalman causal", 0)):
+        runs = [side_by_side(q, stamps, lag) for _ in range(args.repeats)]
+        bank = [run["bank"] for run in runs]
         verdict = (
             "met in every repeat" if max(bank) <= 0.3 else ("met (median)" if np.median(bank) <= 0.3 else "NOT met")
         )
-        whole = float(np.median(costs[f"{key} whole"]))
-        print(f"{label}: the bank {said(key + ' bank')} (target <= 0.3: {verdict}); the whole update "
-              f"{said(key + ' whole')}, {whole / peer:.2f}x polyfit's")  # fmt: skip
+        print(f"{label}: the bank {said(bank, ' ms a message')} (target <= 0.3: {verdict}), "
+              f"{said([run['bank'] / run['peer'] for run in runs], 'x')} the peer's; the whole update "
+              f"{said([run['whole'] for run in runs], ' ms')}, "
+              f"{said([run['whole'] / run['peer'] for run in runs], 'x')} the peer's; the peer "
+              f"{said([run['peer'] for run in runs], ' ms')}")  # fmt: skip
 
 
 if __name__ == "__main__":
