@@ -107,14 +107,15 @@ def check_accelerations(recording: Path, output: Path, seconds: float) -> float:
     model = load_model(URDF)
     store = typestore()
     stamps, accels = [], []
+    epoch_s = EPOCH_NS / 1e9
     with Reader(output) as reader:
         connections = [c for c in reader.connections if c.topic.endswith(LINK_STATES.lstrip("~"))]
         for connection, _, raw in reader.messages(connections=connections):
             message = store.deserialize_cdr(raw, connection.msgtype)
             t = message.header.stamp.sec + message.header.stamp.nanosec * 1e-9
-            if t < EPOCH_NS / 1e9 + 0.9 * seconds:
+            if t < epoch_s + 0.9 * seconds:
                 continue
-            stamps.append(t - EPOCH_NS / 1e9)
+            stamps.append(t - epoch_s)
             accels.append([[a.linear.x, a.linear.y, a.linear.z] for a in message.points[0].accelerations])
     t = np.asarray(stamps)
     w = np.linspace(1.0, 4.0, len(model.joint_names))

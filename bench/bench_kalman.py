@@ -56,7 +56,8 @@ def side_by_side(q: np.ndarray, stamps: np.ndarray, lag: int) -> dict[str, float
     spent = dict.fromkeys(calls, 0.0)
     clock = time.perf_counter
     for k in range(len(stamps)):
-        for name in order[k % 3 :] + order[: k % 3]:
+        turn = k % len(order)
+        for name in order[turn:] + order[:turn]:
             started = clock()
             calls[name](k)
             spent[name] += clock() - started

@@ -15,10 +15,9 @@ import numpy as np
 
 from neforward_ros import forward_recursion, load_model
 from neforward_ros.model import JointKind, RobotModel
+from neforward_ros.stamps import NS
 
 from conftest import EPOCH_NS
-
-NS = 1_000_000_000
 
 
 def moving_plan(model: RobotModel, **options) -> dict:
