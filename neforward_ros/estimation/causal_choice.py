@@ -102,7 +102,13 @@ def _bounds(times: np.ndarray, target: float, half_widths: np.ndarray, lead: flo
 def usable(times: np.ndarray, target: float, half_widths: np.ndarray, lead: float = 0.0) -> np.ndarray:
     """Which candidates' windows hold enough samples (C,): at least degree + :data:`EXTRA`."""
     lo, hi = _bounds(times, target, half_widths, lead)
-    return (hi - lo)[_layout(tuple(half_widths))[0]] >= np.repeat(np.array(DEGREES), len(half_widths)) + EXTRA
+    return (hi - lo)[_layout(tuple(half_widths))[0]] >= _least_samples(len(half_widths))
+
+
+@lru_cache(maxsize=16)
+def _least_samples(levels: int) -> np.ndarray:
+    """Each candidate's least number of samples (C,), degree by degree, ``levels`` windows each."""
+    return np.repeat(np.array(DEGREES), levels) + EXTRA
 
 
 def _wanted(only: np.ndarray | None, count: int) -> np.ndarray | None:

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -372,7 +373,7 @@ class KalmanBank:
             moving = white > fallback * NOISE_FLOOR
             if moving.any() and self._reads % CHECK_EVERY == 1:
                 on_clock, _ = noise_of(np.array([r for _, r, _ in samples]), values, coloured=False)
-                if np.median(on_clock[moving]) < WRITTEN * np.median(white[moving]):
+                if _median_of(on_clock[moving]) < WRITTEN * _median_of(white[moving]):
                     self.written = True
                     white = on_clock
         seen = self._steps.get(kind)
@@ -391,7 +392,7 @@ class KalmanBank:
         if not told.any():
             known = self.known_noise.get(kind)
             return known if known is not None else fallback**2
-        found = float(max(np.median(variance[told]), (fallback * NOISE_FLOOR) ** 2))
+        found = float(max(_median_of(variance[told]), (fallback * NOISE_FLOOR) ** 2))
         self.read_noise[kind] = found
         return found
 
@@ -411,11 +412,19 @@ class KalmanBank:
             self.track._velocity_noise = noise
 
 
-def _median(values: deque[float]) -> float:
+def _median(values: Iterable[float]) -> float:
     """The median of a few numbers, without numpy's overhead."""
     ordered = sorted(values)
     middle = len(ordered) // 2
     return ordered[middle] if len(ordered) % 2 else 0.5 * (ordered[middle - 1] + ordered[middle])
+
+
+def _median_of(values: np.ndarray) -> float:
+    """numpy's median of a few numbers (NaN if any is), without its overhead."""
+    listed = values.tolist()
+    if any(value != value for value in listed):
+        return math.nan
+    return _median(listed)
 
 
 def _concrete(settings: KalmanSettings, length_scale: float) -> KalmanSettings:

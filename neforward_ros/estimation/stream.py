@@ -480,13 +480,12 @@ class StreamingEstimator:
         else:
             values = positions
         m = len(group.joints)
-        unknown = np.full(values.shape[1], np.nan)
         if settings.method == "difference":
             fitted, d1, d2 = local_difference(times, values, target_s, lead_ns / NS)
-            return _per_joint((fitted, d1, d2, unknown), m, by_velocity, exact)
+            return _per_joint((fitted, d1, d2, np.full(values.shape[1], np.nan)), m, by_velocity, exact)
         if not settings.adaptive and group.track is None:  # (polyfit's option: the joined bank's fits adapt)
             fitted, d1, d2 = fit_window(times, values, target_s, settings.window / 2.0, settings.degree)
-            return _per_joint((fitted, d1, d2, unknown), m, by_velocity, exact)
+            return _per_joint((fitted, d1, d2, np.full(values.shape[1], np.nan)), m, by_velocity, exact)
         derivative = np.full(values.shape[1], 2)
         if fitted_velocities and exact:
             derivative = np.where(by_velocity, 1, 2)
@@ -585,10 +584,13 @@ class StreamingEstimator:
             chosen, error = self._scores.choose(available, joints)
         else:  # only the chosen ones
             available = usable(times, target_s, self._half_widths, lead)[:, None]
-            if models is not None:
-                available = np.concatenate([np.broadcast_to(available, (fits, len(joints))), np.isfinite(models[3])])
+            if models is not None:  # the fits' rows (the same for every joint), then the models'
+                both = np.empty((fits + len(models[3]), len(joints)), dtype=bool)
+                both[:fits] = available
+                np.isfinite(models[3], out=both[fits:])
+                available = both
             chosen, error = self._scores.choose(available, joints)
-            only = np.unique(chosen[(chosen >= 0) & (chosen < fits)])
+            only = np.array(sorted({c for c in chosen.tolist() if 0 <= c < fits}), dtype=np.intp)
             value, d1, d2, _, _ = candidates(times, values, target_s, self._half_widths, derivative, only, lead)
         if models is not None:  # the fits' rows, then the models'
             value, d1, d2 = (np.concatenate([a[:fits], b]) for a, b in zip((value, d1, d2), models[:3], strict=True))
@@ -599,9 +601,9 @@ class StreamingEstimator:
         # strained: the smallest window of its degree that the samples allow (the next candidate is the next
         # degree's, or not usable)
         after = np.minimum(pick + 1, len(available) - 1)
-        every = np.broadcast_to(available, (len(available), len(joints)))
+        following = available[after, columns] if available.shape[1] > 1 else available[after, 0]
         levels = len(self._half_widths)
-        smallest = ((pick % levels == levels - 1) | ~every[after, columns]) & (pick < fits)
+        smallest = ((pick % levels == levels - 1) | ~following) & (pick < fits)
         mine = (fitted, first, second, error, smallest)
         ours = np.where(derivative == 2, second, first)
         known &= np.isfinite(ours)  # (a candidate whose normal equations proved singular gives none)
@@ -623,7 +625,10 @@ class StreamingEstimator:
         # estimate's falls short of the rule's errors on a coarse encoder, where they come and go)
         since = target_s - self._rule_checked[joints]
         decay = np.where(np.isfinite(since), np.exp(-since / (0.5 * self.settings.window)), 0.0)
-        self._rule_spread[:, joints] = decay * self._rule_spread[:, joints] + [rule[3] ** 2, np.ones(len(joints))]
+        remembered = decay * self._rule_spread[:, joints]
+        remembered[0] += rule[3] ** 2
+        remembered[1] += 1.0
+        self._rule_spread[:, joints] = remembered
         self._rule_checked[joints] = target_s
         spread = np.fmax(rule[3], np.sqrt(self._rule_spread[0, joints] / self._rule_spread[1, joints]))
         agree = np.abs(ours - theirs) <= GAMMA * np.hypot(spread, error)
