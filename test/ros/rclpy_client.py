@@ -124,7 +124,7 @@ class Client(Node):
         start = time.monotonic()
         for k in range(plan["count"]):
             delay = start + k * period - time.monotonic()
-            if delay > 0:
+            if delay > 0 and not plan.get("burst"):  # a burst: every message at once, stamped at the rate
                 self.spin_for(delay)
             if self.clock is not None:
                 self.clock.publish(Clock(clock=stamp(plan["sim_time_ns"] + k * round(NS / plan["rate"]))))

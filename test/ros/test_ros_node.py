@@ -113,6 +113,23 @@ def test_ros2_run_with_a_params_file_gives_the_moving_robots_kinematics(graph, t
     assert "Traceback" not in node.log() and "ERROR" not in node.log()
 
 
+def test_a_burst_of_joint_states_is_answered_whole_and_in_order(graph, tmp_path) -> None:
+    # 400 messages stamped 5 ms apart, published at once: they queue while the node works, and its
+    # callback takes them from the queue in runs (ros_node.TAKEN_PER_CALLBACK) between executor rounds.
+    node = graph.start(
+        "ros2", "run", "neforward_ros", "neforward_node", "--ros-args", "--params-file",
+        params_file(tmp_path, **panda_parameters()),
+    )  # fmt: skip
+    node.wait_for("model 'panda'")
+    plan = moving_plan(MODEL, record=OUTPUTS, expect=360, burst=True, linger=30.0)
+    received = graph.client(plan)
+    check_moving_robot(received, plan, False)
+    sent = [plan["epoch_ns"] + k * 5_000_000 for k in range(plan["count"])]
+    for topic in OUTPUTS:
+        assert [stamp_ns(m) for m in received[topic]] == sent[20:380], topic
+    assert "Traceback" not in node.log() and "ERROR" not in node.log()
+
+
 def test_model_from_the_robot_description_topic_of_another_process(graph) -> None:
     graph.latch(PANDA)  # a separate process, as robot_state_publisher publishes it: transient local
     node = graph.start("ros2", "run", "neforward_ros", "neforward_node")
