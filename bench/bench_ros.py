@@ -10,7 +10,9 @@ mode and in the default fixed-lag mode, where latency is counted, as in bench_dd
 input that completed the output (the first one ``lag`` after it): processing, not the lag. The
 floor is an rclpy node that publishes every JointState it takes straight back, with no computation.
 
-It also prints what building one link_states message costs the two ways the rclpy node could do it:
+It also prints what one round of rclpy's executor costs per message (``ros_driver.py rounds``: queued
+messages taken one round each, or in the callback as the node takes them), and what building one
+link_states message costs the two ways the rclpy node could do it:
 as an rclpy message object, serialized by rclpy, or with neforward_ros.cdr's encoder (what it does).
 
 Usage: python bench/bench_ros.py [--seconds 3] [--rates 250,500,1000,2000] [--method kalman] [--robots arm]
@@ -70,6 +72,15 @@ def main() -> None:
     print(
         f"one arm link_states message: rclpy message object + rclpy serialization {costs['typed']:.0f} us, "
         f"neforward_ros.cdr {costs['cdr']:.0f} us ({costs['typed'] / costs['cdr']:.1f}x faster; same bytes)"
+    )
+    done = graph.run(workspace.python, str(DRIVER), "rounds", "--count", "5000")
+    if done.returncode != 0:
+        sys.exit(f"bench_ros: the executor measurement failed:\n{done.stderr}")
+    rounds = json.loads(done.stdout)
+    print(
+        f"5000 queued JointStates to a subscriber that does nothing: {rounds['rounds']:.0f} us each through "
+        f"rclpy's executor (a round each), {rounds['taken']:.0f} us taken in its callback as the node takes "
+        f"them ({rounds['rounds'] / rounds['taken']:.1f}x)"
     )
     print(f"rmw_cyclonedds on loopback; {args.seconds:g} s per rate; latency from the completing input")
     print(

@@ -5,6 +5,10 @@ python ros_driver.py drive --names a,b,c --rate 500 --seconds 3 --topic /neforwa
     the outputs raw; prints one JSON line: sent, received, latencies (ms).
 python ros_driver.py echo
     the floor: an rclpy node that publishes each JointState it takes, as it came, on /echo.
+python ros_driver.py rounds --count 5000
+    what the executor's round per message costs: a subscriber that does nothing takes ``count``
+    queued JointStates once through the executor (one round each) and once taking the queued ones in
+    its callback, as the node does (up to 16 a callback); prints one JSON line of us per message.
 python ros_driver.py serialization --urdf robot.urdf
     the cost of one link_states message built as an rclpy message object and serialized, against
     neforward_ros.cdr's encoder, on the same contents; prints one JSON line.
@@ -103,6 +107,45 @@ def echo(arguments: argparse.Namespace) -> None:
         rclpy.try_shutdown()
 
 
+def rounds(arguments: argparse.Namespace) -> None:
+    rclpy.init()
+    node = Node("bench_rounds")
+    deep = QoSProfile(depth=arguments.count * 2)
+    publisher = node.create_publisher(JointState, "/rounds", deep)
+    got = [0]
+    subscription = None
+    taking = False
+
+    def take(data: bytes) -> None:
+        got[0] += 1
+        for _ in range(16 if taking else 0):
+            with subscription.handle:
+                taken = subscription.handle.take_message(JointState, True)
+            if taken is None:
+                return
+            got[0] += 1
+
+    subscription = node.create_subscription(JointState, "/rounds", take, deep, raw=True)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    message = JointState(name=[f"j{k}" for k in range(7)], position=[0.1] * 7)
+    costs = {}
+    for taking in (False, True):
+        got[0] = 0
+        for _ in range(arguments.count):  # queued before the subscriber spins
+            publisher.publish(message)
+        time.sleep(0.5)
+        start = time.perf_counter()
+        deadline = time.monotonic() + 60
+        while got[0] < arguments.count and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        costs["taken" if taking else "rounds"] = (time.perf_counter() - start) / max(got[0], 1) * 1e6
+        costs["received_taken" if taking else "received_rounds"] = got[0]
+    print(json.dumps(costs))
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
 def serialization(arguments: argparse.Namespace) -> None:
     import numpy as np
     from motion_family import EPOCH_NS
@@ -150,10 +193,12 @@ def main() -> None:
     d.add_argument("--seconds", type=float, required=True)
     d.add_argument("--topic", required=True)
     commands.add_parser("echo")
+    r = commands.add_parser("rounds")
+    r.add_argument("--count", type=int, default=5000)
     s = commands.add_parser("serialization")
     s.add_argument("--urdf", required=True)
     arguments = parser.parse_args()
-    {"drive": drive, "echo": echo, "serialization": serialization}[arguments.command](arguments)
+    {"drive": drive, "echo": echo, "rounds": rounds, "serialization": serialization}[arguments.command](arguments)
 
 
 if __name__ == "__main__":

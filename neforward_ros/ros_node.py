@@ -41,7 +41,8 @@ OUTPUT_QOS_DEPTH = 10
 TAKEN_PER_CALLBACK = 16
 """Further messages an input subscription's callback takes from its queue, when they have queued, before
 it hands back to the executor (whose round per message, rebuilding its wait set in Python, costs about
-0.25 ms on a 2-core machine, a quarter of a 1 kHz stream's budget: ``bench/bench_ros.py``). The bound
+0.2 ms on a 2-core machine, a fifth of a 1 kHz stream's budget, against 18 us taken here:
+``bench/bench_ros.py`` prints both). The bound
 keeps the node's other callbacks (the other inputs, parameters) served while a backlog is worked off."""
 
 
@@ -96,7 +97,7 @@ class NeforwardNode(Node):
         def callback(data: bytes) -> None:
             handler(data, self.get_clock().now().nanoseconds)  # sim time when use_sim_time is set
             # The messages that queued meanwhile, taken here as the executor takes them (the same rclpy
-            # call), up to TAKEN_PER_CALLBACK: each round of the executor costs about 0.25 ms of its own.
+            # call), up to TAKEN_PER_CALLBACK: each round of the executor costs about 0.2 ms of its own.
             for _ in range(TAKEN_PER_CALLBACK):
                 with subscription.handle:
                     taken = subscription.handle.take_message(message_type, True)
