@@ -65,18 +65,20 @@ def main() -> None:
     config = write_config(directory)
 
     graph = Graph(workspace, config, directory)
-    done = graph.run(workspace.python, str(DRIVER), "serialization", "--urdf", str(ROBOTS["arm (13 links, 8 joints)"]))
-    if done.returncode != 0:
-        sys.exit(f"bench_ros: the serialization measurement failed:\n{done.stderr}")
-    costs = json.loads(done.stdout)
+
+    def measured(what: str, *command: str) -> dict:
+        """The JSON line a ros_driver.py command prints (ROS 2's Python), or exit saying what failed."""
+        done = graph.run(workspace.python, str(DRIVER), *command)
+        if done.returncode != 0:
+            sys.exit(f"bench_ros: the {what} measurement failed:\n{done.stderr}")
+        return json.loads(done.stdout)
+
+    costs = measured("serialization", "serialization", "--urdf", str(ROBOTS["arm (13 links, 8 joints)"]))
     print(
         f"one arm link_states message: rclpy message object + rclpy serialization {costs['typed']:.0f} us, "
         f"neforward_ros.cdr {costs['cdr']:.0f} us ({costs['typed'] / costs['cdr']:.1f}x faster; same bytes)"
     )
-    done = graph.run(workspace.python, str(DRIVER), "rounds", "--count", "5000")
-    if done.returncode != 0:
-        sys.exit(f"bench_ros: the executor measurement failed:\n{done.stderr}")
-    rounds = json.loads(done.stdout)
+    rounds = measured("executor", "rounds", "--count", "5000")
     print(
         f"5000 queued JointStates to a subscriber that does nothing: {rounds['rounds']:.0f} us each through "
         f"rclpy's executor (a round each), {rounds['taken']:.0f} us taken in its callback as the node takes "

@@ -121,7 +121,7 @@ def test_a_burst_of_joint_states_is_answered_whole_and_in_order(graph, tmp_path)
         params_file(tmp_path, **panda_parameters()),
     )  # fmt: skip
     node.wait_for("model 'panda'")
-    plan = moving_plan(MODEL, record=OUTPUTS, expect=360, burst=True, linger=30.0)
+    plan = moving_plan(MODEL, record=OUTPUTS, expect=360, burst=True)
     received = graph.client(plan)
     check_moving_robot(received, plan, False)
     sent = [plan["epoch_ns"] + k * 5_000_000 for k in range(plan["count"])]
