@@ -8,7 +8,7 @@ python ros_driver.py echo
 python ros_driver.py rounds --count 5000
     what the executor's round per message costs: a subscriber that does nothing takes ``count``
     queued JointStates once through the executor (one round each) and once taking the queued ones in
-    its callback, as the node does (up to 16 a callback); prints one JSON line of us per message.
+    its callback with the node's own ``ros_node.take_queued``; prints one JSON line of us per message.
 python ros_driver.py serialization --urdf robot.urdf
     the cost of one link_states message built as an rclpy message object and serialized, against
     neforward_ros.cdr's encoder, on the same contents; prints one JSON line.
@@ -108,6 +108,8 @@ def echo(arguments: argparse.Namespace) -> None:
 
 
 def rounds(arguments: argparse.Namespace) -> None:
+    from neforward_ros.ros_node import take_queued
+
     rclpy.init()
     node = Node("bench_rounds")
     deep = QoSProfile(depth=arguments.count * 2)
@@ -116,14 +118,13 @@ def rounds(arguments: argparse.Namespace) -> None:
     subscription = None
     taking = False
 
-    def take(data: bytes) -> None:
+    def count(data: bytes) -> None:
         got[0] += 1
-        for _ in range(16 if taking else 0):
-            with subscription.handle:
-                taken = subscription.handle.take_message(JointState, True)
-            if taken is None:
-                return
-            got[0] += 1
+
+    def take(data: bytes) -> None:
+        count(data)
+        if taking:  # as the node's callback does
+            take_queued(subscription, JointState, count)
 
     subscription = node.create_subscription(JointState, "/rounds", take, deep, raw=True)
     executor = SingleThreadedExecutor()

@@ -12,6 +12,7 @@ import gc
 import logging
 import signal
 import sys
+from collections.abc import Callable
 from typing import Any
 
 import rclpy
@@ -21,6 +22,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy, qos_policy_name_from_kind
 from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.subscription import Subscription
 from rosidl_runtime_py.utilities import get_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -42,8 +44,8 @@ TAKEN_PER_CALLBACK = 16
 """Further messages an input subscription's callback takes from its queue, when they have queued, before
 it hands back to the executor (whose round per message, rebuilding its wait set in Python, costs about
 0.2 ms on a 2-core machine, a fifth of a 1 kHz stream's budget, against 18 us taken here:
-``bench/bench_ros.py`` prints both). The bound
-keeps the node's other callbacks (the other inputs, parameters) served while a backlog is worked off."""
+``bench/bench_ros.py`` prints both). The bound keeps the node's other callbacks (the other inputs,
+parameters) served while a backlog is worked off."""
 
 
 class NeforwardNode(Node):
@@ -94,16 +96,12 @@ class NeforwardNode(Node):
         return {p.name: _plain(self.get_parameter(p.name).value) for p in PARAMETERS}
 
     def _raw_subscription(self, message_type: type, topic: str, handler: Any, qos: QoSProfile) -> None:
-        def callback(data: bytes) -> None:
+        def receive(data: bytes) -> None:
             handler(data, self.get_clock().now().nanoseconds)  # sim time when use_sim_time is set
-            # The messages that queued meanwhile, taken here as the executor takes them (the same rclpy
-            # call), up to TAKEN_PER_CALLBACK: each round of the executor costs about 0.2 ms of its own.
-            for _ in range(TAKEN_PER_CALLBACK):
-                with subscription.handle:
-                    taken = subscription.handle.take_message(message_type, True)
-                if taken is None:
-                    return
-                handler(taken[0], self.get_clock().now().nanoseconds)
+
+        def callback(data: bytes) -> None:
+            receive(data)
+            take_queued(subscription, message_type, receive)
 
         def incompatible(event: Any) -> None:
             policy = qos_policy_name_from_kind(event.last_policy_kind)
@@ -155,6 +153,18 @@ class NeforwardNode(Node):
             return SetParametersResult(successful=False, reason=str(exc))
         self.pipeline.update_settings(settings)
         return SetParametersResult(successful=True)
+
+
+def take_queued(subscription: Subscription, message_type: type, receive: Callable[[bytes], None]) -> None:
+    """Hand ``receive`` the serialized messages that have queued on a raw subscription, taken as rclpy's
+    executor takes them (the same call), up to :data:`TAKEN_PER_CALLBACK`: each round of the executor
+    costs about 0.2 ms of its own."""
+    for _ in range(TAKEN_PER_CALLBACK):
+        with subscription.handle:
+            taken = subscription.handle.take_message(message_type, True)
+        if taken is None:
+            return
+        receive(taken[0])
 
 
 def _plain(value: Any) -> Any:

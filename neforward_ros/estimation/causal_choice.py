@@ -107,8 +107,11 @@ def usable(times: np.ndarray, target: float, half_widths: np.ndarray, lead: floa
 
 @lru_cache(maxsize=16)
 def _least_samples(levels: int) -> np.ndarray:
-    """Each candidate's least number of samples (C,), degree by degree, ``levels`` windows each."""
-    return np.repeat(np.array(DEGREES), levels) + EXTRA
+    """Each candidate's least number of samples (C,), degree by degree, ``levels`` windows each (kept:
+    read-only)."""
+    least = np.repeat(np.array(DEGREES), levels) + EXTRA
+    least.flags.writeable = False
+    return least
 
 
 def _wanted(only: np.ndarray | None, count: int) -> np.ndarray | None:
