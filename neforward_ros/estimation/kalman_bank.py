@@ -219,8 +219,10 @@ class KalmanBank:
         (worked out once per sample)."""
         assert self.scores is not None
         if self._weights is None:
-            weights = np.exp(self.scores - self.scores.max(axis=0, keepdims=True))
-            self._weights = weights / weights.sum(axis=0, keepdims=True)
+            weights = self.scores - np.maximum.reduce(self.scores, axis=0)
+            np.exp(weights, out=weights)
+            weights /= np.add.reduce(weights, axis=0)
+            self._weights = weights
         return self._weights
 
     def _shares(self) -> np.ndarray:
@@ -292,7 +294,8 @@ class KalmanBank:
             accelerations, filtered_variances = filtered
             expected = np.add.reduce(weights * (filtered_variances[:, None] - variances), axis=0)
             revision = np.add.reduce(weights * accelerations, axis=0) - smoothed
-            ratio = np.where(expected > 0.0, revision * revision / np.where(expected > 0.0, expected, 1.0), 1.0)
+            ratio = np.ones(count)
+            np.divide(revision * revision, expected, out=ratio, where=expected > 0.0)
             self.revisions = (1.0 - REVISION_MEMORY) * self.revisions + REVISION_MEMORY * ratio
         return self.revisions
 

@@ -35,6 +35,7 @@ import threading
 
 import numpy as np
 
+from neforward_ros.estimation import native_kalman
 from neforward_ros.kinematics import native
 
 WORTH_WAITING = 5000
@@ -512,7 +513,14 @@ void causal_candidates(long count, const double *times, const double *values, lo
     double *fit = malloc((size_t)n * 5 * sizeof(double));
     long next = upper_bound(times, count, target), last = next;  /* the samples [next, last) are in the sums */
     for (long c = 0; c < ndeg * nlevels * n * 4; c++) out[c] = NAN;
-    for (long l = nlevels - 1; l >= 0; l--) {
+    long widest = 0;  /* the largest window wanted (the smallest level index): no samples added beyond it */
+    if (wanted != NULL) {
+        widest = nlevels;
+        for (long k = 0; k < ndeg; k++)
+            for (long l = 0; l < nlevels; l++)
+                if (wanted[k * nlevels + l] && l < widest) widest = l;
+    }
+    for (long l = nlevels - 1; l >= widest; l--) {
         double reach = lead < levels[l] ? lead : levels[l];
         long lo = lower_bound(times, count, target + reach - 2.0 * levels[l]);
         long hi = upper_bound(times, count, target + reach);
@@ -652,6 +660,9 @@ void choose_last(long m, long ndeg, long n, double *scores, const double *acc, c
 """
 
 
+SOURCE += native_kalman.SOURCE  # one library: the Kalman bank's step is ready when the fits are
+
+
 class NativeAdaptiveFit:
     """The compiled library, built on first use in a thread (see the module docstring); ``get``
     gives it once ready, else None."""
@@ -726,6 +737,7 @@ def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
     library.choose_last.argtypes = [long, long, long, pointer, pointer, pointer, pointer, long, double, pointer,
                                     pointer]  # fmt: skip
     library.choose_last.restype = None
+    native_kalman.declare(library)
     return library
 
 

@@ -1,0 +1,312 @@
+"""One step of the Kalman bank's batched filter (:meth:`~.kalman.KalmanTrack.add`) as machine code: the
+prediction, the measurement, the likelihood and the fixed-lag smoother's update of the live steps and
+its new step, for every model of a bank, in one C call.
+
+In numpy the step is some forty calls on arrays of a few hundred numbers (4 models, 15 states, 7
+joints), each a few microseconds however small its arrays: most of a bank's cost per message. The
+C function computes the same quantities (:mod:`.kalman`'s docstring), with the kept rows moved as
+R C_k F^T less a product of one or two columns (Z = R C_k F^T H^T: R C_k A = R C_k F^T - Z S^-1 H Pp,
+R C_k g = Z S^-1 e, equal in exact arithmetic to numpy's R C_k A and R C_k g), F^T's zeros skipped,
+each product's terms added in index order where numpy's matrix products may pair them otherwise,
+and a 2 x 2 innovation covariance inverted by its adjugate where numpy calls LAPACK: the two agree to
+rounding (``test/test_native_kalman.py``; both against the dense posterior in
+``test/test_estimators.py``).
+
+It is compiled with the adaptive fit's C, in the same library (:mod:`.native_fit`): until that is
+ready, and where there is no compiler or ``NEFORWARD_NATIVE=off``, numpy serves.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import itertools
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from neforward_ros.estimation.kalman import _Smoothed
+
+MAX_DIM = 32
+"""The largest state the C function takes (the motion model's is 15); numpy serves above it."""
+
+SOURCE = r"""
+#define KALMAN_MAX_DIM 32
+#define KALMAN_LOG_2PI 1.8378770664093453
+
+/* out (rows, cols) = a (rows, inner) b (inner, cols), each output's terms added in index order (the loop
+   over the output's columns innermost, where the compiler vectorises). sparse: a's zero entries skipped
+   (for finite b only: 0 times infinity would be NaN). */
+static void kalman_product(long rows, long inner, long cols, const double *a, const double *b, double *out,
+                           int sparse) {
+    for (long i = 0; i < rows; i++) {
+        double *o = out + i * cols;
+        for (long j = 0; j < cols; j++) o[j] = 0.0;
+        for (long l = 0; l < inner; l++) {
+            double f = a[i * inner + l];
+            if (sparse && f == 0.0) continue;
+            const double *row = b + l * cols;
+            for (long j = 0; j < cols; j++) o[j] += f * row[j];
+        }
+    }
+}
+
+/* out (rows, cols) = a (rows, inner) b^T, b (cols, inner): dot products of rows, in index order. */
+static void kalman_product_t(long rows, long inner, long cols, const double *a, const double *b, double *out) {
+    for (long i = 0; i < rows; i++)
+        for (long c = 0; c < cols; c++) {
+            double s = 0.0;
+            for (long l = 0; l < inner; l++) s += a[i * inner + l] * b[c * inner + l];
+            out[i * cols + c] = s;
+        }
+}
+
+/* out (rows, cols) = a (rows, inner) b (inner, cols) for a b whose row l is zero outside the columns
+   lo[l] .. hi[l] - 1 (a transition's transpose), those zeros' terms skipped (for finite a only). */
+static void kalman_banded(long rows, long inner, long cols, const double *a, const double *b, const long *lo,
+                          const long *hi, double *out) {
+    for (long i = 0; i < rows; i++) {
+        double *o = out + i * cols;
+        for (long j = 0; j < cols; j++) o[j] = 0.0;
+        for (long l = 0; l < inner; l++) {
+            double f = a[i * inner + l];
+            const double *row = b + l * cols;
+            for (long j = lo[l]; j < hi[l]; j++) o[j] += f * row[j];
+        }
+    }
+}
+
+/* One step of M filters of d states sharing m columns (joints), measured by p = 1 or 2 rows of H (the
+   position's; the velocity's). F, Q, F^T (M, d, d); H (M, 2, d). The workspace holds the last filtered
+   state (M, d, m) and covariance (M, d, d), replaced by the new ones; then each column's log-likelihood
+   of the sample and its normalised innovation squared (M, m) each, written; the samples y (2, m) and the
+   measurement variances r (2). Where R is not NULL, the fixed-lag smoother (kalman.py's _Smoothed, buffers
+   of cap steps): the live steps first .. end - 1 are moved (means += R C_k g, variances -= (r C_k F^T H^T)
+   S^-1 (...)^T, R C_k <- R C_k A) and step end is written (the new step's read-outs, R P, r P r^T, and
+   this measurement's A and g). Returns 0; 1 where d or p is out of range, 2 without memory. */
+int kalman_step(long M, long d, long m, long p, const double *F, const double *Q, const double *Ft,
+                const double *H, double *workspace, const double *R, double *means, double *rows,
+                double *variances, double *filtered_acc, double *filtered_var, double *moves, double *pushes,
+                long cap, long first, long end) {
+    if (d > KALMAN_MAX_DIM || d < 1 || p < 1 || p > 2) return 1;
+    double *xp = malloc(sizeof(double) * (size_t)((2 * d + 4) * m));
+    if (xp == NULL) return 2;
+    double *e = xp + d * m;  /* the innovations (p, m) */
+    double *w = e + 2 * m;   /* S^-1 e (p, m) */
+    double *g = w + 2 * m;   /* F^T H^T S^-1 e (d, m) */
+    double *state = workspace, *cov = state + M * d * m, *likelihood = cov + M * d * d, *nis = likelihood + M * m;
+    const double *y = nis + M * m, *r = y + 2 * m;
+    for (long k = 0; k < M; k++) {
+        const double *Fk = F + k * d * d, *Qk = Q + k * d * d, *Ftk = Ft + k * d * d, *Hk = H + k * 2 * d;
+        double *x = state + k * d * m, *P = cov + k * d * d;
+        double T[KALMAN_MAX_DIM * KALMAN_MAX_DIM], HP[2 * KALMAN_MAX_DIM], S[4], inv[4], det;
+        long lo[KALMAN_MAX_DIM], hi[KALMAN_MAX_DIM];  /* F^T's non-zero columns, row by row */
+        for (long l = 0; l < d; l++) {
+            lo[l] = d;
+            hi[l] = 0;
+            for (long j = 0; j < d; j++)
+                if (Ftk[l * d + j] != 0.0) { if (j < lo[l]) lo[l] = j; hi[l] = j + 1; }
+            if (hi[l] == 0) lo[l] = 0;
+        }
+        /* the prediction: x = F x, P = F (P F^T) + Q */
+        kalman_product(d, d, m, Fk, x, xp, 0);
+        kalman_banded(d, d, d, P, Ftk, lo, hi, T);
+        kalman_product(d, d, d, Fk, T, P, 1);
+        for (long i = 0; i < d * d; i++) P[i] += Qk[i];
+        /* the measurement: H Pp, S = H Pp H^T + diag(r), its inverse */
+        kalman_product(p, d, d, Hk, P, HP, 0);
+        kalman_product_t(p, d, p, HP, Hk, S);
+        if (p == 1) {
+            /* the prediction's own part is never negative: rounding can make it so on noise-free samples */
+            S[0] = (S[0] > 0.0 ? S[0] : 0.0) + r[0];
+            det = S[0];
+            inv[0] = 1.0 / S[0];
+        } else {
+            S[0] += r[0];
+            S[3] += r[1];
+            det = S[0] * S[3] - S[1] * S[2];
+            inv[0] = S[3] / det; inv[1] = -S[1] / det; inv[2] = -S[2] / det; inv[3] = S[0] / det;
+        }
+        kalman_product(p, d, m, Hk, xp, e, 0);
+        for (long i = 0; i < p * m; i++) e[i] = y[i] - e[i];
+        kalman_product(p, p, m, inv, e, w, 0);
+        double *like = likelihood + k * m, *nk = nis + k * m;
+        for (long j = 0; j < m; j++) {
+            double squared = 0.0;
+            for (long a = 0; a < p; a++) squared += e[a * m + j] * w[a * m + j];
+            nk[j] = squared / (double)p;
+            like[j] = -0.5 * (squared + log(det) + (double)p * KALMAN_LOG_2PI);
+        }
+        /* the update: x = xp + K e, P = Pp - K H Pp, K = (S^-1 H Pp)^T; then P symmetrised */
+        double K[2 * KALMAN_MAX_DIM];  /* K[i * p + a] */
+        for (long i = 0; i < d; i++)
+            for (long a = 0; a < p; a++) {
+                double s = 0.0;
+                for (long b = 0; b < p; b++) s += inv[a * p + b] * HP[b * d + i];
+                K[i * p + a] = s;
+            }
+        kalman_product(d, p, m, K, e, x, 0);
+        for (long i = 0; i < d * m; i++) x[i] += xp[i];
+        kalman_product(d, p, d, K, HP, T, 0);
+        for (long i = 0; i < d * d; i++) T[i] = P[i] - T[i];
+        for (long i = 0; i < d; i++)
+            for (long j = 0; j < d; j++) P[i * d + j] = 0.5 * (T[i * d + j] + T[j * d + i]);
+        if (R == NULL) continue;
+        /* the smoother: F^T H^T, A = F^T - (F^T H^T S^-1) H Pp, g = F^T H^T S^-1 e */
+        const double *Rk = R + k * 3 * d;
+        double MF[2 * KALMAN_MAX_DIM], MFI[2 * KALMAN_MAX_DIM];  /* [i * p + a] */
+        double *A = moves + (k * cap + end) * d * d, *gk = pushes + (k * cap + end) * d * m;
+        kalman_product_t(d, d, p, Ftk, Hk, MF);
+        kalman_product(d, p, p, MF, inv, MFI, 0);
+        kalman_product(d, p, d, MFI, HP, A, 0);
+        for (long i = 0; i < d * d; i++) A[i] = Ftk[i] - A[i];
+        kalman_product(d, p, m, MF, w, g, 0);
+        for (long i = 0; i < d * m; i++) gk[i] = g[i];
+        double *mk = means + k * cap * 3 * m, *rk = rows + k * cap * 3 * d, *vk = variances + k * cap;
+        long live = 3 * (end - first);
+        if (live > 0) {
+            /* with Z = R C_k (F^T H^T) (live, p): means += Z (S^-1 e), variances -= z S^-1 z^T (z: Z's
+               acceleration rows), R C_k <- R C_k A = (R C_k) F^T - (Z S^-1) H Pp; on the transposed rows
+               (d, live), each product's terms in the same order, so that its loops run along the steps */
+            double *read = malloc(sizeof(double) * (size_t)(live * (2 * d + 2 * p + m)));
+            if (read == NULL) { free(xp); return 2; }
+            double *moved = read + live * d, *Z = moved + live * d, *ZI = Z + live * p, *shift = ZI + live * p;
+            double *block = rk + 3 * first * d;
+            for (long i = 0; i < live; i++)
+                for (long l = 0; l < d; l++) read[l * live + i] = block[i * d + l];
+            for (long a = 0; a < p; a++) {  /* Z^T (p, live) */
+                double *o = Z + a * live;
+                for (long i = 0; i < live; i++) o[i] = 0.0;
+                for (long l = 0; l < d; l++) {
+                    double f = MF[l * p + a];
+                    const double *row = read + l * live;
+                    for (long i = 0; i < live; i++) o[i] += row[i] * f;
+                }
+            }
+            for (long i = 0; i < live; i++)  /* Z S^-1 (live, p) */
+                for (long a = 0; a < p; a++) {
+                    double s = 0.0;
+                    for (long b = 0; b < p; b++) s += Z[b * live + i] * inv[b * p + a];
+                    ZI[i * p + a] = s;
+                }
+            for (long i = 0; i < live; i++)
+                for (long j = 0; j < m; j++) {
+                    double s = 0.0;
+                    for (long a = 0; a < p; a++) s += Z[a * live + i] * w[a * m + j];
+                    shift[i * m + j] = s;
+                }
+            for (long i = 0; i < live * m; i++) mk[3 * first * m + i] += shift[i];
+            for (long step = 0; step < end - first; step++) {
+                long i = 3 * step + 2;
+                double quadratic = 0.0;
+                for (long a = 0; a < p; a++) quadratic += Z[a * live + i] * ZI[i * p + a];
+                vk[first + step] -= quadratic;
+            }
+            for (long j = 0; j < d; j++) {  /* column j of R C_k F^T, transposed */
+                double *o = moved + j * live;
+                for (long i = 0; i < live; i++) o[i] = 0.0;
+                for (long l = 0; l < d; l++) {
+                    double f = Ftk[l * d + j];
+                    if (f == 0.0) continue;
+                    const double *row = read + l * live;
+                    for (long i = 0; i < live; i++) o[i] += row[i] * f;
+                }
+            }
+            for (long i = 0; i < live; i++)
+                for (long j = 0; j < d; j++) {
+                    double s = 0.0;
+                    for (long a = 0; a < p; a++) s += ZI[i * p + a] * HP[a * d + j];
+                    block[i * d + j] = moved[j * live + i] - s;
+                }
+            free(read);
+        }
+        /* the new step: R x, R P, r P r^T */
+        kalman_product(3, d, m, Rk, x, mk + 3 * end * m, 0);
+        kalman_product(3, d, d, Rk, P, rk + 3 * end * d, 0);
+        double variance = 0.0, *last_row = rk + (3 * end + 2) * d;
+        for (long l = 0; l < d; l++) variance += last_row[l] * Rk[2 * d + l];
+        vk[end] = variance;
+        filtered_var[k * cap + end] = variance;
+        for (long j = 0; j < m; j++) filtered_acc[(k * cap + end) * m + j] = mk[(3 * end + 2) * m + j];
+    }
+    free(xp);
+    return 0;
+}
+"""
+
+
+def declare(library: ctypes.CDLL) -> None:
+    """The argument types of :class:`Stepper`'s C function."""
+    pointer, long = ctypes.c_void_p, ctypes.c_long
+    library.kalman_step.argtypes = [long, long, long, long] + [pointer] * 13 + [long, long, long]
+    library.kalman_step.restype = ctypes.c_int
+
+
+SMOOTHED_BUFFERS = ("means", "rows", "variances", "filtered_accelerations", "filtered_variances", "moves", "pushes")
+"""The buffers of :class:`~.kalman._Smoothed` the C function moves and writes, in its arguments' order."""
+
+
+class Stepper:
+    """The C function's arguments that outlive a step, for one track of ``count`` models, ``dim`` states
+    and ``joints`` columns: a workspace (the newest filtered state and covariance, the outputs, the
+    samples) whose address is taken once, and the addresses of the arrays that do not change (the
+    read-out rows, the smoother's buffers until they are reallocated): a numpy
+    array's address costs microseconds to read, as much as a third of the C function's work.
+
+    Args:
+        library: the compiled library (:data:`~.native_fit.FIT`).
+        rows: the position's and velocity's read-out rows (models, 2, dim).
+        readout: position, velocity and acceleration read-out rows (models, 3, dim).
+    """
+
+    def __init__(self, library: ctypes.CDLL, rows: np.ndarray, readout: np.ndarray, joints: int) -> None:
+        self._function = library.kalman_step
+        count, _, dim = rows.shape
+        self._shape = (count, dim, joints)
+        self._arrays = (np.ascontiguousarray(rows, dtype=float), np.ascontiguousarray(readout, dtype=float))
+        self._rows, self._readout = (array.ctypes.data for array in self._arrays)
+        sizes = (count * dim * joints, count * dim * dim, count * joints, count * joints, 2 * joints, 2)
+        self._workspace = np.zeros(sum(sizes))
+        self._address = self._workspace.ctypes.data
+        bounds = np.cumsum((0, *sizes)).tolist()
+        state, covariance, likelihood, nis, samples, variances = (
+            self._workspace[a:b] for a, b in itertools.pairwise(bounds)
+        )
+        self.state = state.reshape(count, dim, joints)
+        self.covariance = covariance.reshape(count, dim, dim)
+        self.likelihood = likelihood.reshape(count, joints)
+        self.nis = nis.reshape(count, joints)
+        self.samples = samples.reshape(2, joints)
+        self.variances = variances
+        self.holds: object | None = None
+        """The step whose filtered state and covariance the workspace holds (the caller's to set)."""
+        self._buffers: tuple[tuple[np.ndarray, ...], list[int]] | None = None
+
+    def fits(self, joints: int) -> bool:
+        """Whether this stepper serves a track of that many joints."""
+        return self._shape[2] == joints
+
+    def step(self, transition: tuple[int, int, int], measured: int, smoothed: _Smoothed | None) -> None:
+        """One step from the state and covariance in the workspace, with the samples of its first
+        ``measured`` rows (1: positions; 2: and velocities) and their variances, all set by the caller:
+        the workspace then holds the new state, covariance, log-likelihoods and normalised innovations
+        squared. ``transition``: the addresses of F, Q and F^T (models, dim, dim) each, C-contiguous
+        (:meth:`~.motion.MotionModels.transition_addresses`). With ``smoothed`` (a
+        :class:`~.kalman._Smoothed` with room for a step at its ``end``), its live steps are moved and its
+        new step written (the caller counts it)."""
+        count, dim, joints = self._shape
+        if smoothed is None:
+            buffers, capacity, first, end = [None] * len(SMOOTHED_BUFFERS), 0, 0, 0
+        else:
+            arrays = tuple(getattr(smoothed, name) for name in SMOOTHED_BUFFERS)
+            if self._buffers is None or any(a is not b for a, b in zip(arrays, self._buffers[0], strict=True)):
+                if not all(array.flags.c_contiguous and array.dtype == np.float64 for array in arrays):
+                    raise ValueError("the smoother's buffers must be C-contiguous float64 arrays")
+                self._buffers = (arrays, [a.ctypes.data for a in arrays])
+            buffers = self._buffers[1]
+            capacity, first, end = smoothed.variances.shape[1], smoothed.first_live(), smoothed.end
+        status = self._function(count, dim, joints, measured, *transition, self._rows,
+                                self._address, self._readout if smoothed is not None else None, *buffers, capacity,
+                                first, end)  # fmt: skip
+        if status != 0:
+            raise MemoryError("the Kalman step's C function could not work (too large a state, or no memory)")
