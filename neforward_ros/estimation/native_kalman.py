@@ -20,12 +20,9 @@ from __future__ import annotations
 
 import ctypes
 import itertools
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from neforward_ros.estimation.kalman import _Smoothed
 
 MAX_DIM = 32
 """The largest state the C function takes (the motion model's is 15); numpy serves above it."""
@@ -246,6 +243,23 @@ SMOOTHED_BUFFERS = ("means", "rows", "variances", "filtered_accelerations", "fil
 """The buffers of :class:`~.kalman._Smoothed` the C function moves and writes, in its arguments' order."""
 
 
+class SmoothedBuffers(Protocol):
+    """What the C function reads and writes of a fixed-lag smoother (:class:`~.kalman._Smoothed`): its
+    buffers (:data:`SMOOTHED_BUFFERS`, C-contiguous float64, ``variances`` (models, capacity)), its
+    newest step's slot ``end`` and its first live step."""
+
+    means: np.ndarray
+    rows: np.ndarray
+    variances: np.ndarray
+    filtered_accelerations: np.ndarray
+    filtered_variances: np.ndarray
+    moves: np.ndarray
+    pushes: np.ndarray
+    end: int
+
+    def first_live(self) -> int: ...
+
+
 class Stepper:
     """The C function's arguments that outlive a step, for one track of ``count`` models, ``dim`` states
     and ``joints`` columns: a workspace (the newest filtered state and covariance, the outputs, the
@@ -286,7 +300,7 @@ class Stepper:
         """Whether this stepper serves a track of that many joints."""
         return self._shape[2] == joints
 
-    def step(self, transition: tuple[int, int, int], measured: int, smoothed: _Smoothed | None) -> None:
+    def step(self, transition: tuple[int, int, int], measured: int, smoothed: SmoothedBuffers | None) -> None:
         """One step from the state and covariance in the workspace, with the samples of its first
         ``measured`` rows (1: positions; 2: and velocities) and their variances, all set by the caller:
         the workspace then holds the new state, covariance, log-likelihoods and normalised innovations
