@@ -199,16 +199,7 @@ int kalman_step(long M, long d, long m, long p, const double *F, const double *Q
                 for (long a = 0; a < p; a++) quadratic += Z[a * live + i] * ZI[i * p + a];
                 vk[first + step] -= quadratic;
             }
-            for (long j = 0; j < d; j++) {  /* column j of R C_k F^T, transposed */
-                double *o = moved + j * live;
-                for (long i = 0; i < live; i++) o[i] = 0.0;
-                for (long l = 0; l < d; l++) {
-                    double f = Ftk[l * d + j];
-                    if (f == 0.0) continue;
-                    const double *row = read + l * live;
-                    for (long i = 0; i < live; i++) o[i] += row[i] * f;
-                }
-            }
+            kalman_product(d, d, live, Fk, read, moved, 1);  /* (R C_k F^T)^T = F (R C_k)^T */
             for (long i = 0; i < live; i++)
                 for (long j = 0; j < d; j++) {
                     double s = 0.0;
