@@ -1,6 +1,7 @@
 """The Kalman bank's filter step in C (neforward_ros.estimation.native_kalman) against the numpy one it
 replaces, and against the dense Gaussian-process posterior through the existing test of the track
-(test_estimators.py, which runs whichever serves).
+(test_estimators.py, which runs whichever serves); the bank's mixture and causal predictions in C
+(Mixer, Ahead) against numpy's likewise, and C taking over numpy's state part-way.
 
 On a family of streams the two must agree to rounding: 100 Hz to 1 kHz with jitter, one to nine
 joints, positions alone or with velocities, causal and fixed-lag (the smoother's live steps moved, its
@@ -55,7 +56,7 @@ def run(stamps, q, v, lag: int, native_step: bool, monkeypatch, split: int | Non
             bank.forget_before(target)
             newest = bank.track.steps[-1]
             out.append((mixture, std, newest.filtered, newest.covariance, bank.scores, bank.track.nis))
-        used = bank.track._stepper is not None
+        used = bank.track._stepper is not None and bank._mixer is not None
     return out, used
 
 
@@ -85,3 +86,66 @@ def test_the_c_step_agrees_with_numpy_to_rounding(seed: int, monkeypatch) -> Non
         for (name, tolerance), a, b in zip(tolerances.items(), one, other, strict=True):
             scale = float(np.nanmax(np.abs(b)))
             assert np.allclose(a, b, rtol=0.0, atol=tolerance * scale, equal_nan=True), (k, name, a, b)
+
+
+@pytest.mark.parametrize(("seed", "lag", "velocities"), [(0, 0, False), (1, 20, False), (2, 20, True), (3, 0, True)])
+def test_the_c_mixture_equals_numpy_s(seed: int, lag: int, velocities: bool, monkeypatch) -> None:
+    """The models' mixture, its deviations and the revisions (KalmanBank.estimates) in C against numpy's,
+    the filter's step in C for both: the same arithmetic in the same order, so equal to the last few bits
+    (numpy's exp and pow may be other implementations than the C library's), by the likelihood's weights
+    (fixed lag), the predictions' shares (causal, once they have a record) and one model alone."""
+    assert native_fit.FIT.get(wait=True) is not None, "the C library did not build"
+    rng = np.random.default_rng(100 + seed)
+    stamps, q, v = stream(rng, 1000.0, 5, 16)
+    if not velocities:
+        v[:] = np.nan
+    outputs = []
+    for native_mix in (False, True):
+        with monkeypatch.context() as patch:
+            if not native_mix:
+                patch.setattr(KalmanBank, "_mixer_for", lambda self, count, joints: None)
+            banks = [KalmanBank(KalmanSettings(), lag > 0), KalmanBank(KalmanSettings(length_scale=0.1), lag > 0)]
+            out, choosing = [], False
+            for k in range(len(stamps)):
+                target = int(stamps[max(k - lag, 0)])
+                for bank in banks:
+                    bank.add(int(stamps[k]), q[k], v[k])
+                    out.append(np.concatenate(bank.estimate(target), axis=None))
+                    out.append(np.concatenate([bank.revisions, bank.weights().ravel()]))
+                    bank.forget_before(target)
+                choosing |= banks[0]._choosing
+            assert (banks[0]._mixer is not None) == native_mix
+            assert choosing == (lag == 0)
+        outputs.append(np.concatenate(out))
+    numpy_mix, c_mix = outputs
+    assert np.allclose(c_mix, numpy_mix, rtol=1e-12, atol=0.0, equal_nan=True)
+
+
+@pytest.mark.parametrize("lag", [0, 20])
+def test_the_library_ready_part_way_takes_over_numpy_s_state(lag: int, monkeypatch) -> None:
+    """The library is built in a thread while the first samples are filtered in numpy: the C step, mixture
+    and predictions then take over from numpy's state (the filtered state, the smoother's buffers, the
+    kept predictions), and go on as numpy would have, to rounding."""
+    assert native_fit.FIT.get(wait=True) is not None, "the C library did not build"
+    rng = np.random.default_rng(7)
+    stamps, q, v = stream(rng, 1000.0, 4, 16)
+    v[:] = np.nan
+    library = native_fit.FIT.get()
+    outputs = []
+    for ready_at in (None, 500):
+        bank = KalmanBank(KalmanSettings(), smooth=lag > 0)
+        out = []
+        for k in range(len(stamps)):
+            ready = ready_at is not None and k >= ready_at
+            monkeypatch.setattr(native_fit.FIT, "get", lambda wait=False, ready=ready: library if ready else None)
+            bank.add(int(stamps[k]), q[k], v[k])
+            target = int(stamps[max(k - lag, 0)])
+            out.append(np.concatenate(bank.estimate(target), axis=None))
+            bank.forget_before(target)
+        assert (bank._mixer is not None) == (ready_at is not None)
+        assert (bank._ahead is not None) == (ready_at is not None and lag == 0)
+        outputs.append(np.array(out))
+    numpy_only, switched = outputs
+    assert np.array_equal(switched[:500], numpy_only[:500])
+    scale = np.nanmax(np.abs(numpy_only), axis=0)  # each position's, velocity's, acceleration's and deviation's
+    assert np.isclose(switched, numpy_only, rtol=0.0, atol=3e-6 * scale, equal_nan=True).all()

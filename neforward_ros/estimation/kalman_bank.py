@@ -41,6 +41,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from neforward_ros.estimation import native_fit, native_kalman
 from neforward_ros.estimation.adaptive import noise_of
 from neforward_ros.estimation.clock import WriteClock
 from neforward_ros.estimation.kalman import KalmanTrack
@@ -120,10 +121,12 @@ class KalmanBank:
         """Causal: (models, joints) the squared errors of each model's predictions :data:`HORIZON` ahead,
         forgotten over :data:`MEMORY`."""
         self._weights: np.ndarray | None = None
+        self._mixer: native_kalman.Mixer | None = None  # the C mixture's workspace, once it serves
         self._origin: int | None = None  # ns: the first stamp
         self.known_scores = known_scores  # (models, joints): the weights before a restart, as log-weights
         # each model's predictions from the last samples, carried forward to the newest (models, dim, kept, m)
         self._predictions: np.ndarray | None = None
+        self._ahead: native_kalman.Ahead | None = None  # the same in C, once it serves
         self._settled = 0  # the filter's time (ns) from which the predictions are scored
         self._recorded = 0  # the filter's time (ns) from which the record of their errors serves
         self._choosing = False  # causal: whether the estimate is by the errors' shares (:meth:`_shares`)
@@ -192,17 +195,33 @@ class KalmanBank:
         samples :data:`HORIZON` before (as many sample intervals as come nearest, at least one), None
         where there is no such prediction yet (a start, a silence). ``previous`` and ``now``: the
         filter's times of the step before and of this one."""
-        predictions = self._predictions  # (models, dim, kept, m), the oldest first
-        if silence or previous is None:
-            predictions = None
+        restart = silence or previous is None
+        if restart:
             self._settled = now + round(SETTLE * NS)
             if previous is None:
                 self._recorded = self._settled + round(MEMORY * NS)
+        ahead = max(1, round(HORIZON / usual)) if usual else 1
+        carrier = self._carrier()
+        if carrier is not None:  # in C
+            if restart:
+                carrier.reset()
+            scored, transition = False, None
+            if carrier.kept and previous is not None:
+                step = interval(now, previous)
+                transition = self.models.transition(step)[0]
+                if now >= self._settled:
+                    address = self.models.transition_addresses(step)[0]
+                    scored = carrier.predict((transition, address), positions, ahead, self.track._noise)
+            errors = carrier.errors.copy() if scored else None
+            carrier.push(self.track.steps[-1].filtered, transition, ahead)
+            return errors
+        predictions = self._predictions  # (models, dim, kept, m), the oldest first
+        if restart:
+            predictions = None
         elif predictions is not None:
             transition, _, _ = self.models.transition(interval(now, previous))
             models, dim, kept, m = predictions.shape
             predictions = (transition @ predictions.reshape(models, dim, kept * m)).reshape(predictions.shape)
-        ahead = max(1, round(HORIZON / usual)) if usual else 1
         errors = None
         if predictions is not None and predictions.shape[2] >= ahead and now >= self._settled:
             predicted = predictions[:, :, -ahead]
@@ -213,6 +232,20 @@ class KalmanBank:
         kept = newest if predictions is None else np.concatenate([predictions[:, :, 1 - ahead :], newest], axis=2)
         self._predictions = kept[:, :, -ahead:]
         return errors
+
+    def _carrier(self) -> native_kalman.Ahead | None:
+        """The predictions' rings in C (:class:`~.native_kalman.Ahead`) once the library is built, taking
+        over what numpy kept before; None while numpy serves."""
+        carrier = self._ahead
+        if carrier is not None:  # (a bank's joints do not change: select() makes another)
+            return carrier
+        library = native_fit.FIT.get() if 4 <= self.models.dim <= native_kalman.MAX_DIM else None
+        if library is None:
+            return None
+        shape = (len(self.models), self.models.dim, self.track.steps[-1].filtered.shape[2])
+        carrier = self._ahead = native_kalman.Ahead(library, *shape, kept=self._predictions)
+        self._predictions = None
+        return carrier
 
     def weights(self) -> np.ndarray:
         """(models, joints): each model's weight per joint by the likelihood, exp(score) normalised
@@ -260,6 +293,9 @@ class KalmanBank:
         at = self._model_of(target)
         estimates = self.track.estimate(at)  # (M, 3, m)
         own = self.track.acceleration_variance(at)  # (M,)
+        mixer = self._mixer_for(*estimates.shape[::2])
+        if mixer is not None:
+            return (estimates, own, *self._mix_native(mixer, at, estimates, own))
         variances = own[:, None]  # (M, 1)
         if len(estimates) == 1:
             weights = np.ones((1, estimates.shape[2]))
@@ -270,6 +306,49 @@ class KalmanBank:
         variance = np.add.reduce(weights * (variances + spread * spread), axis=0)
         std = np.sqrt(variance * np.maximum(self._revised(at, weights, mixture[2], variances), 1.0))
         return estimates, own, mixture, std
+
+    def _mixer_for(self, count: int, joints: int) -> native_kalman.Mixer | None:
+        """The C mixture's workspace for this many models and joints, once the library is built."""
+        mixer = self._mixer
+        if mixer is not None and mixer.fits(count, joints):
+            return mixer
+        library = native_fit.FIT.get()
+        if library is None:
+            return None
+        self._mixer = native_kalman.Mixer(library, count, joints)
+        return self._mixer
+
+    def _mix_native(
+        self, mixer: native_kalman.Mixer, at: int, estimates: np.ndarray, own: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`estimates`' mixture and standard deviations (with :meth:`_revised`'s update) in one C call."""
+        mixer.estimates[...] = estimates
+        mixer.own[...] = own
+        weighting = 0  # (Mixer.mix)
+        if len(estimates) == 1:
+            mixer.weights[...] = 1.0
+        elif self._choosing:  # _shares()
+            assert self.errors is not None
+            mixer.weights[...] = self.errors
+            weighting = 2
+        elif self._weights is not None:
+            mixer.weights[...] = self._weights
+        else:  # exp(score) normalised, as weights() has it
+            assert self.scores is not None
+            mixer.weights[...] = self.scores
+            weighting = 1
+        count = estimates.shape[2]
+        if self.revisions is None or len(self.revisions) != count:
+            self.revisions = np.ones(count)
+        mixer.revisions[...] = self.revisions
+        filtered = self.track.filtered_at(at)
+        if filtered is not None:
+            mixer.filtered_accelerations[...], mixer.filtered_variances[...] = filtered
+        mixer.mix(filtered is not None, weighting, REVISION_MEMORY, 0.5 * MEMORY / HORIZON)
+        if weighting == 1:
+            self._weights = mixer.weights.copy()
+        self.revisions = mixer.revisions.copy()
+        return mixer.mixture.copy(), mixer.std.copy()
 
     def converged(self, target: int) -> np.ndarray:
         """Which models (models,) have had the samples since the start to converge from their prior by the
@@ -344,7 +423,10 @@ class KalmanBank:
         bank._steps = {k: v[columns] for k, v in self._steps.items()}
         bank.revisions = None if self.revisions is None else self.revisions[columns]
         bank.errors = None if self.errors is None else self.errors[:, columns]
-        bank._predictions = None if self._predictions is None else self._predictions[..., columns]
+        predictions = self._predictions
+        if self._ahead is not None:
+            predictions = self._ahead.stacked() if self._ahead.kept else None
+        bank._predictions = None if predictions is None else predictions[..., columns]
         bank._settled, bank._recorded, bank._choosing = self._settled, self._recorded, self._choosing
         return bank
 
@@ -409,7 +491,7 @@ class KalmanBank:
             self._positions.append((seconds, on_clock, np.asarray(positions, dtype=float).copy()))
             noise = self._noise("positions", self._positions, FALLBACK_NOISE)
             self.track._noise = noise
-        if settings.velocity_noise == 0 and np.isfinite(velocities).all():
+        if settings.velocity_noise == 0 and math.isfinite(np.add.reduce(velocities)):
             self._velocities.append((seconds, on_clock, np.asarray(velocities, dtype=float).copy()))
             noise = self._noise("velocities", self._velocities, FALLBACK_VELOCITY_NOISE)
             self.track._velocity_noise = noise
