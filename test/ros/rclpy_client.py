@@ -129,7 +129,8 @@ class Client(Node):
             if delay > 0 and not plan.get("burst"):  # a burst: every message at once, stamped at the rate
                 self.spin_for(delay)
             if self.clock is not None:
-                self.clock.publish(Clock(clock=stamp(plan["sim_time_ns"] + k * round(NS / plan["rate"]))))
+                step = plan.get("sim_step_ns", round(NS / plan["rate"]))  # the clock's advance per message
+                self.clock.publish(Clock(clock=stamp(plan["sim_time_ns"] + k * step)))
             self.publisher.publish(self.message(k))
             rclpy.spin_once(self, timeout_sec=0)
         # Then until every recorded topic has the outputs expected, or none has come for ``linger`` s: on a
