@@ -211,7 +211,7 @@ class KalmanBank:
                 transition = self.models.transition(step)[0]
                 if now >= self._settled:
                     address = self.models.transition_addresses(step)[0]
-                    scored = carrier.predict((transition, address), positions, ahead, self.track._noise)
+                    scored = carrier.predict(address, positions, ahead, self.track._noise)
             errors = carrier.errors.copy() if scored else None
             carrier.push(self.track.steps[-1].filtered, transition, ahead)
             return errors
@@ -337,10 +337,7 @@ class KalmanBank:
             assert self.scores is not None
             mixer.weights[...] = self.scores
             weighting = 1
-        count = estimates.shape[2]
-        if self.revisions is None or len(self.revisions) != count:
-            self.revisions = np.ones(count)
-        mixer.revisions[...] = self.revisions
+        mixer.revisions[...] = self._revision_record(estimates.shape[2])
         filtered = self.track.filtered_at(at)
         if filtered is not None:
             mixer.filtered_accelerations[...], mixer.filtered_variances[...] = filtered
@@ -367,8 +364,7 @@ class KalmanBank:
         with it, while the one-step innovations hardly see it. 1 where there is no revision to read."""
         filtered = self.track.filtered_at(at)
         count = len(smoothed)
-        if self.revisions is None or len(self.revisions) != count:
-            self.revisions = np.ones(count)
+        self._revision_record(count)
         if filtered is not None:
             accelerations, filtered_variances = filtered
             expected = np.add.reduce(weights * (filtered_variances[:, None] - variances), axis=0)
@@ -376,6 +372,12 @@ class KalmanBank:
             ratio = np.ones(count)
             np.divide(revision * revision, expected, out=ratio, where=expected > 0.0)
             self.revisions = (1.0 - REVISION_MEMORY) * self.revisions + REVISION_MEMORY * ratio
+        return self.revisions
+
+    def _revision_record(self, count: int) -> np.ndarray:
+        """:attr:`revisions` for ``count`` joints, 1 each where there is none yet (or for other joints)."""
+        if self.revisions is None or len(self.revisions) != count:
+            self.revisions = np.ones(count)
         return self.revisions
 
     @property

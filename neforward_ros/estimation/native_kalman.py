@@ -226,10 +226,8 @@ int kalman_step(long M, long d, long m, long p, const double *F, const double *Q
         /* the new step: R x, R P, r P r^T */
         kalman_product(3, d, m, Rk, x, mk + 3 * end * m, 0);
         kalman_product(3, d, d, Rk, P, rk + 3 * end * d, 0);
-        double variance = 0.0, *last_row = rk + (3 * end + 2) * d;
-        for (long l = 0; l < d; l++) variance += last_row[l] * Rk[2 * d + l];
-        vk[end] = variance;
-        filtered_var[k * cap + end] = variance;
+        vk[end] = rpr;  /* r P r^T, above (the same sums in the same order as R P's row, then times r) */
+        filtered_var[k * cap + end] = rpr;
         for (long j = 0; j < m; j++) filtered_acc[(k * cap + end) * m + j] = mk[(3 * end + 2) * m + j];
     }
     free(xp);
@@ -342,6 +340,14 @@ SMOOTHED_BUFFERS = ("means", "rows", "variances", "filtered_accelerations", "fil
 """The buffers of :class:`~.kalman._Smoothed` the C function moves and writes, in its arguments' order."""
 
 
+def _workspace(*sizes: int) -> tuple[np.ndarray, int, list[np.ndarray]]:
+    """One zeroed float64 array of the sizes' sum, its address (taken once: reading a numpy array's address
+    costs microseconds) and its consecutive parts of those sizes (views, flat)."""
+    workspace = np.zeros(sum(sizes))
+    bounds = np.cumsum((0, *sizes)).tolist()
+    return workspace, workspace.ctypes.data, [workspace[a:b] for a, b in itertools.pairwise(bounds)]
+
+
 class SmoothedBuffers(Protocol):
     """What the C function reads and writes of a fixed-lag smoother (:class:`~.kalman._Smoothed`): its
     buffers (:data:`SMOOTHED_BUFFERS`, C-contiguous float64, ``variances`` (models, capacity); replaced
@@ -379,13 +385,10 @@ class Stepper:
         self._shape = (count, dim, joints)
         self._arrays = (np.ascontiguousarray(rows, dtype=float), np.ascontiguousarray(readout, dtype=float))
         self._rows, self._readout = (array.ctypes.data for array in self._arrays)
-        sizes = (count * dim * joints, count * dim * dim, count * joints, count * joints, 2 * joints, 2, count)
-        self._workspace = np.zeros(sum(sizes))
-        self._address = self._workspace.ctypes.data
-        bounds = np.cumsum((0, *sizes)).tolist()
-        state, covariance, likelihood, nis, samples, variances, acceleration_variance = (
-            self._workspace[a:b] for a, b in itertools.pairwise(bounds)
+        self._workspace, self._address, parts = _workspace(
+            count * dim * joints, count * dim * dim, count * joints, count * joints, 2 * joints, 2, count
         )
+        state, covariance, likelihood, nis, samples, variances, acceleration_variance = parts
         self.state = state.reshape(count, dim, joints)
         self.covariance = covariance.reshape(count, dim, dim)
         self.likelihood = likelihood.reshape(count, joints)
@@ -444,13 +447,10 @@ class Mixer:
     def __init__(self, library: ctypes.CDLL, count: int, joints: int) -> None:
         self._function = library.kalman_mix
         self._shape = (count, joints)
-        sizes = (count * 3 * joints, count, count * joints, count, count * joints, joints, 3 * joints, joints)
-        self._workspace = np.zeros(sum(sizes))
-        self._address = self._workspace.ctypes.data
-        bounds = np.cumsum((0, *sizes)).tolist()
-        estimates, own, accelerations, variances, weights, revisions, mixture, std = (
-            self._workspace[a:b] for a, b in itertools.pairwise(bounds)
+        self._workspace, self._address, parts = _workspace(
+            count * 3 * joints, count, count * joints, count, count * joints, joints, 3 * joints, joints
         )
+        estimates, own, accelerations, variances, weights, revisions, mixture, std = parts
         self.estimates = estimates.reshape(count, 3, joints)
         self.own = own
         self.filtered_accelerations = accelerations.reshape(count, joints)
@@ -500,11 +500,10 @@ class Ahead:
 
     def _allocate(self, capacity: int) -> None:
         count, dim, joints = self._shape
-        sizes = (capacity * count * dim * joints, capacity * count * dim * dim, count * joints, joints)
-        self._workspace = np.zeros(sum(sizes))
-        self._address = self._workspace.ctypes.data
-        bounds = np.cumsum((0, *sizes)).tolist()
-        states, transitions, errors, sample = (self._workspace[a:b] for a, b in itertools.pairwise(bounds))
+        self._workspace, self._address, parts = _workspace(
+            capacity * count * dim * joints, capacity * count * dim * dim, count * joints, joints
+        )
+        states, transitions, errors, sample = parts
         self.states = states.reshape(capacity, count, dim, joints)
         self.transitions = transitions.reshape(capacity, count, dim, dim)
         self.errors = errors.reshape(count, joints)
@@ -526,17 +525,17 @@ class Ahead:
             carried.append(state)
         return np.stack(carried, axis=2)
 
-    def predict(self, transition: tuple[np.ndarray, int], positions: np.ndarray, ahead: int, noise: float) -> bool:
+    def predict(self, transition: int, positions: np.ndarray, ahead: int, noise: float) -> bool:
         """Where ``ahead`` states are kept, ``errors`` set to each model's squared error of the position it
         predicted for ``positions`` from the state ``ahead`` steps back (at least ``noise``), through this
-        step's ``transition`` (F (models, dim, dim), C-contiguous, and its address): returns whether it was."""
+        step's transition (the address of F (models, dim, dim), C-contiguous): returns whether it was."""
         if self.kept < ahead:
             return False
         self.sample[...] = positions
         count, dim, joints = self._shape
         capacity = len(self.states)
         scored = (self.head + self.kept - ahead) % capacity
-        self._function(count, dim, joints, transition[1], self._address, capacity, scored, ahead, noise)
+        self._function(count, dim, joints, transition, self._address, capacity, scored, ahead, noise)
         return True
 
     def push(self, newest: np.ndarray, transition: np.ndarray | None, ahead: int) -> None:
