@@ -104,6 +104,21 @@ def make(kind: str, rate: float, bits: int, seed: int, seconds: float = 8.0, joi
     return t, measured, q, qdd
 
 
+def bunched_times(seed: int, rate: float = 500.0, seconds: float = 3.0, period: float = 0.015) -> np.ndarray:
+    """Stamps (s, whole nanoseconds) of a writer that stamps each message as it writes it and, on a
+    loaded machine, runs only every ``period`` (+-30 %): it then writes every message due at ``rate``
+    since, 40 us (+0-15 us) apart. Each position is taken at its own stamp (the writer of ``neforward
+    demo``), so only the stamps' spacing differs from a steady stream's."""
+    rng = np.random.default_rng(seed)
+    out, now, written = [], 0.0, 0
+    while now < seconds:
+        now += period * rng.uniform(0.7, 1.3)
+        due = int(now * rate)
+        out += [now + k * 40e-6 + rng.uniform(0.0, 15e-6) for k in range(due - written)]
+        written = max(written, due)
+    return np.unique(np.round(np.array(out) * 1e9)) / 1e9
+
+
 def repeated(seed: int, count: int, share: float) -> np.ndarray:
     """Which of :func:`make`'s ``count`` samples repeat the sample before (bool (count,))."""
     if not share:

@@ -44,6 +44,7 @@ from functools import lru_cache
 import numpy as np
 
 from neforward_ros.estimation import native_fit
+from neforward_ros.estimation.fit import lapack_inverse
 
 DEGREES = (2, 3, 4, 5)
 """The candidates' polynomial degrees."""
@@ -201,7 +202,7 @@ def python_candidates(
     # One batch of (top + 1)-square systems, candidate by candidate (degree by degree, then level): a lower
     # degree's Gram matrix padded with the identity, its moments with zeros, gives the same coefficients.
     gram = np.where(square[rows], sums[hankel][:, :, at].transpose(2, 0, 1), _EYE)
-    inverse = _inverses(gram)[:, :3]  # value, first and second derivative's rows (every degree >= 2)
+    inverse = lapack_inverse(gram)[0][:, :3]  # value, first and second derivative's rows (every degree >= 2)
     coefficients = np.einsum("cij,cjn->cin", inverse, moments[at] * used[rows])  # (C', 3, n)
     h = scale[rows]
     first, second = inverse[:, 1, 1, None] / (h * h), 4.0 * inverse[:, 2, 2, None] / (h * h) ** 2
@@ -211,21 +212,6 @@ def python_candidates(
     out[3] = np.where(derivative == 2, out[2], out[1])
     out[4, rows] = np.where(derivative == 2, second, first)
     return out[0], out[1], out[2], out[3], out[4]
-
-
-def _inverses(matrices: np.ndarray) -> np.ndarray:
-    """The inverses of a batch of matrices (B, d, d); NaN for one singular to rounding (its candidate
-    gives no estimate, as the C function's Cholesky says)."""
-    try:
-        return np.linalg.inv(matrices)
-    except np.linalg.LinAlgError:
-        out = np.full(matrices.shape, np.nan)
-        for k, matrix in enumerate(matrices):
-            try:
-                out[k] = np.linalg.inv(matrix)
-            except np.linalg.LinAlgError:
-                pass
-        return out
 
 
 class ErrorScores:

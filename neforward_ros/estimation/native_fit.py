@@ -36,7 +36,14 @@ import threading
 import numpy as np
 
 from neforward_ros.estimation import native_kalman
+from neforward_ros.estimation.fit import LEAST_PIVOT, ROUNDING_PIVOT
 from neforward_ros.kinematics import native
+
+DIVISORS = 8
+"""The divisors of the smallest change tried for an encoder's step (:data:`~.adaptive.DIVISORS`)."""
+HIDDEN = 0.1
+"""Below this fraction of a fractional step's rounding, the noise read is blind to it
+(:data:`~.adaptive.HIDDEN`)."""
 
 WORTH_WAITING = 5000
 """Targets from which a batch waits for the build rather than fitting in numpy meanwhile."""
@@ -48,7 +55,13 @@ FLAGS = ("-O3", "-fPIC", "-shared", "-ffp-contract=off", "-fno-fast-math")
 """-O3 vectorises the loops over joints (each joint's sums still added in order: no reassociation
 without fast-math): a third faster than -O1 for a humanoid's 33 joints, built in 0.3 s."""
 
-SOURCE = r"""
+SOURCE = f"""
+#define LEAST_PIVOT {LEAST_PIVOT!r}  /* fit.LEAST_PIVOT */
+#define ROUNDING_PIVOT {ROUNDING_PIVOT!r}  /* fit.ROUNDING_PIVOT */
+#define DIVISORS {DIVISORS}  /* adaptive.DIVISORS */
+#define HIDDEN {HIDDEN!r}  /* adaptive.HIDDEN */
+"""
+SOURCE += r"""
 #include <math.h>
 #include <stdlib.h>
 
@@ -93,8 +106,10 @@ static void divided_weights(const double *t, long s, double *w) {
    factor L of the highest's serves every degree (its leading block), as do the first three columns of
    X = L^-1 and y = X b (b the scaled moments): the coefficients (A^-1 b)_q = sum_{i=q}^{e} X[i][q] y[i]
    and the variance factors (A^-1)_qq = sum_{i=q}^{e} X[i][q]^2, each sum up to the degree e.
-   Returns the number of leading columns factored (the equations singular beyond): degree e's fit is
-   made where e + 1 is at most that. */
+   Returns the number of leading columns factored (the equations too ill-posed beyond: a pivot below
+   LEAST_PIVOT of its diagonal entry, see fit.py): degree e's fit is made where e + 1 is at most that.
+   fit[g]'s fifth entry is the factor by which the least noise is raised for its rounding (ROUNDING_PIVOT
+   over the least relative pivot of its columns, at least 1). */
 static long level_fits(const double *sums, const double *moments, long n, long ndeg, const long *degree,
                        const int *wanted, double *const *fit, double h, double h0, const long *derivative) {
     long d = 0;
@@ -103,10 +118,13 @@ static long level_fits(const double *sums, const double *moments, long n, long n
     scale[0] = 1.0;
     for (long k = 1; k <= 2 * (d - 1); k++) scale[k] = scale[k - 1] * r;
     long ok = d;
+    double least[16];  /* the least relative pivot of columns 0 .. j */
     for (long j = 0; j < d && ok == d; j++) {
-        double pivot = sums[2 * j] * scale[2 * j];
+        double diagonal = sums[2 * j] * scale[2 * j], pivot = diagonal;
         for (long k = 0; k < j; k++) pivot -= low[j * 16 + k] * low[j * 16 + k];
-        if (!(pivot > 0.0)) { ok = j; break; }
+        double relative = pivot / diagonal;
+        if (!(pivot > 0.0) || !(relative >= LEAST_PIVOT)) { ok = j; break; }
+        least[j] = j > 0 && least[j - 1] < relative ? least[j - 1] : relative;
         low[j * 16 + j] = sqrt(pivot);
         inverse_diagonal[j] = 1.0 / low[j * 16 + j];
         for (long i = j + 1; i < d; i++) {
@@ -151,19 +169,21 @@ static long level_fits(const double *sums, const double *moments, long n, long n
             for (long k = 2; k <= i && columns > 2; k++) second += x[32 + k] * x[32 + k];
             first *= per_h * per_h;
             second *= per_h2 * per_h2;
+            double raised = ROUNDING_PIVOT / least[i] > 1.0 ? ROUNDING_PIVOT / least[i] : 1.0;
             double *f = fit[g];
             for (long j = 0; j < n; j++) {
                 f[j * 5] = c[j];
                 f[j * 5 + 1] = c[n + j] * per_h;
                 f[j * 5 + 2] = c[2 * n + j] * per_h2;
                 f[j * 5 + 3] = derivative[j] == 2 ? second : first;
+                f[j * 5 + 4] = raised;
             }
         }
     }
     return ok;
 }
 
-/* level_fits of one degree: 0 if its normal equations are singular. */
+/* level_fits of one degree: 0 if its normal equations are too ill-posed (LEAST_PIVOT). */
 static int level_fit(const double *sums, const double *moments, long n, long order, double h, double h0,
                      const long *derivative, double *fit) {
     int wanted = 1;
@@ -186,7 +206,7 @@ static void choose(double *fits, long valid, long n, const long *lo, const long 
             double quantisation = step[j] * step[j] / 12.0;
             double crossings = step[j] > 0.0 ? changes[l * n + j] + 1.0 : cnt;
             double independent = nmin(nmax(crossings, 1.0), nmax(cnt, 1.0));
-            double least = floor_ * fits[j * 5];  /* level 0's value */
+            double least = floor_ * (fits[j * 5] * fit[4]);  /* level 0's value, raised for rounding */
             double effective = nmax(nmax(white[j] * white[j], quantisation * cnt / independent), least * least);
             double std = sqrt(nmax(fit[3], 0.0) * effective);
             fit[3] = std;
@@ -307,6 +327,7 @@ static int fit_target(long count, const double *times, const double *values, lon
         for (long j = 0; j < n; j++) { double c = window[i * n + j] - white[j]; spread[j] += c * c; }
     for (long j = 0; j < n; j++) { spread[j] = sqrt(spread[j] * (1.0 / width)); white[j] = 0.0; }
     if (width >= 8) {
+        int fraction[n];  /* per column: its step a fraction of its smallest change (grid_step) */
         const double *wt = times + lo[0];
         for (long i = 0; i + 1 < width; i++)  /* the smallest change: an encoder's step, if on its grid */
             for (long j = 0; j < n; j++) {
@@ -314,18 +335,27 @@ static int fit_target(long count, const double *times, const double *values, lon
                 if (a > 0.0 && a < step[j]) step[j] = a;
             }
         for (long j = 0; j < n; j++) {  /* an encoder's grid: each sample a whole number of steps from
-                                            the first, and the changes not all one number of steps */
+                                            the first, and the changes not all one number of steps; the
+                                            step the smallest change over 1, 2 ... DIVISORS, the largest
+                                            that fits (grid_step) */
+            fraction[j] = 0;
             if (!isfinite(step[j])) continue;
-            double position = 0.0, first = 0.0;
-            int varied = 0;
-            for (long i = 0; i + 1 < width; i++) {
-                double ratio = (window[(i + 1) * n + j] - window[i * n + j]) * (1.0 / step[j]);
-                position += ratio;
-                if (fabs(position - nearbyint(position)) > lattice) { step[j] = INFINITY; break; }
-                if (i == 0) first = nearbyint(ratio);
-                else if (nearbyint(ratio) != first) varied = 1;
+            double smallest = step[j];
+            step[j] = INFINITY;
+            for (long divisor = 1; divisor <= DIVISORS && isinf(step[j]); divisor++) {
+                fraction[j] = divisor > 1;
+                double candidate = smallest / divisor, position = 0.0, first = 0.0;
+                int varied = 0, off = 0;
+                for (long i = 0; i + 1 < width; i++) {
+                    double ratio = (window[(i + 1) * n + j] - window[i * n + j]) * (1.0 / candidate);
+                    position += ratio;
+                    if (fabs(position - nearbyint(position)) > lattice) { off = 1; break; }
+                    if (i == 0) first = nearbyint(ratio);
+                    else if (nearbyint(ratio) != first) varied = 1;
+                }
+                if (!off && varied) step[j] = candidate;
             }
-            if (!varied) step[j] = INFINITY;
+            if (isinf(step[j])) fraction[j] = 0;
         }
         /* noise from the normalised sixth divided differences of samples 1, 2, 4, 8 ... apart (see
            sixth_differences and noise_of): stride 1 is the white noise; a coloured stride counts
@@ -355,6 +385,9 @@ static int fit_target(long count, const double *times, const double *values, lon
             for (long j = 0; j < n; j++) any |= alive[j] > 0.0;
             if (!any) break;
         }
+        for (long j = 0; j < n; j++)  /* a fraction of the smallest change: only where the noise read is
+                                         blind to its rounding (grid_step) */
+            if (fraction[j] && !(white[j] < HIDDEN * step[j] * (1.0 / sqrt(12.0)))) step[j] = INFINITY;
     }
     for (long j = 0; j < n; j++) if (isinf(step[j]) || width < 8) step[j] = 0.0;
     /* on a grid, each level's rounding errors are drawn afresh at most where the change between
@@ -406,10 +439,14 @@ static int fit_target(long count, const double *times, const double *values, lon
             fit[2 + a] = fits_also + (also_at[a] + l) * n * 5;
         }
         long factored = level_fits(sums, moments, n, 2 + nalso, degree, wanted, fit, levels[l], h0, derivative);
-        for (long g = 0; g < 2 + nalso; g++)
-            if (wanted[g] && degree[g] + 1 > factored) status = 1;
-        if (status != 0) break;
+        /* an ill-posed level: no fit there, nor at any smaller one (each degree's valid levels lead) */
+        if (wanted[0] && order + 1 > factored) valid = l;
+        if (wanted[1] && lower + 1 > factored) valid_low = l;
+        for (long a = 0; a < nalso; a++)
+            if (wanted[2 + a] && also[a] + 1 > factored) valid_also[a] = l;
     }
+    if (valid == 0) status = 1;  /* the largest window ill-posed: the caller's function serves (NaN) */
+    for (long a = 0; a < nalso; a++) if (valid_also[a] == 0) status = 1;
     if (status == 0) {
         choose(fits, valid, n, lo, hi, changes, derivative, white, step, spread, gamma, roughness, floor_, out,
                noise);
