@@ -59,9 +59,9 @@ noise the adaptive rule takes (:data:`~neforward_ros.estimation.adaptive.FLOOR` 
 of exact samples): it grows as about 1e-17 / pivot of the window's largest position times the fit's
 noise gain (at most 1.2e-8 / pivot floors' deviations on 18,000 random designs), so the rule raises
 that floor by ``ROUNDING_PIVOT / pivot`` there, and a fit's rounding stays within about one of its
-stated deviations (8.5 without, between pivots of 1e-10 and 1e-9). Windows this poorly posed are rare outside bursts (a
-one-sided degree-6 window with a dropout of a third of it); at a real encoder's noise the raise is
-hidden under the noise."""
+stated deviations (8.5 without, between pivots of 1e-10 and 1e-9). Windows this poorly posed are rare
+outside bursts (a one-sided degree-6 window with a dropout of a third of it); at a real encoder's noise
+the raise is hidden under the noise."""
 _ELEMENTWISE = 256  # matrices from which spd_inverse beats LAPACK's calls (lapack_inverse)
 
 
@@ -171,8 +171,8 @@ def block_fits(
 
 def lapack_inverse(matrices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """:func:`spd_inverse` by LAPACK's batched Cholesky factor L and L's inverse (the inverse is
-    L^-T L^-1, as there): for a few matrices, several times faster than the elementwise factorisation;
-    that one where a matrix is not positive definite (LAPACK raises)."""
+    L^-T L^-1, as there): for a few matrices, several times faster than the elementwise factorisation,
+    which serves where LAPACK finds a matrix not positive definite (it raises)."""
     try:
         low = np.linalg.cholesky(matrices)
         inverse_low = np.linalg.inv(low)
