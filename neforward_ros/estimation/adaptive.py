@@ -195,12 +195,14 @@ def grid_step(
     they lie on its grid; else the largest of it divided by 2, 3 ... :data:`DIVISORS` that they lie on,
     where the noise read from their sixth differences, ``white`` (..., n), is below :data:`HIDDEN` of
     that step's rounding (step / sqrt(12)); 0 elsewhere. ``inside``: as for :func:`on_grid`."""
-    step = np.zeros(np.shape(smallest))
-    for divisor in range(DIVISORS, 0, -1):  # the largest step last: it stands where several fit
+    step = np.where(on_grid(differences, smallest, inside), smallest, 0.0)
+    # a smaller fraction's rounding is smaller still: where even a half's is not hidden, none is
+    hidden = (step == 0.0) & (white < HIDDEN * (smallest / 2) * _ROUNDING)
+    if not hidden.any():
+        return step
+    for divisor in range(DIVISORS, 1, -1):  # the largest step last: it stands where several fit
         candidate = smallest / divisor
-        fits = on_grid(differences, candidate, inside)
-        if divisor > 1:
-            fits &= white < HIDDEN * candidate * _ROUNDING
+        fits = hidden & on_grid(differences, candidate, inside) & (white < HIDDEN * candidate * _ROUNDING)
         step = np.where(fits, candidate, step)
     return step
 
