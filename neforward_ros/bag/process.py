@@ -165,6 +165,9 @@ def process_bag(
             for partial, final in zip(partials, finals, strict=True):
                 partial.rename(final)
             written_recording.rename(output)
+            # the staging folder too, while Ctrl-C is held off: one taken after the outputs are in place
+            # ends the run as done (exit 0), and must not leave the folder behind
+            shutil.rmtree(recording_writer.staging, ignore_errors=True)
             for pending in signal.sigpending() & stops:
                 signal.sigwait({pending})
         finally:
@@ -179,7 +182,6 @@ def process_bag(
             partial.unlink(missing_ok=True)
         raise
     assert recording_writer is not None
-    shutil.rmtree(recording_writer.staging, ignore_errors=True)
     report.topics = recording_writer.topics
     report.written = written_counts
     report.seconds = time.monotonic() - started
