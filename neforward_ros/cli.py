@@ -21,7 +21,7 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from neforward_ros import terminal
+from neforward_ros import ctrl_c, terminal
 from neforward_ros.errors import NeforwardError
 from neforward_ros.resources import DEFAULT_ROBOT
 
@@ -124,7 +124,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """The command; returns its exit status (130 after Ctrl-C, as shells count it)."""
+    """The command; returns its exit status (130 after Ctrl-C, as shells count it).
+
+    Run in-process, it leaves SIGINT's handler as it found it (a command whose work is done ignores
+    Ctrl-C from then, :mod:`neforward_ros.ctrl_c`).
+    """
+    try:
+        return _command(argv)
+    finally:
+        ctrl_c.release()
+
+
+def _command(argv: Sequence[str] | None) -> int:
+    """:func:`main`, with Ctrl-C left held off where the command's work is done."""
     try:
         argv = list(sys.argv[1:] if argv is None else argv)
         ros_args: list[str] = []
@@ -235,7 +247,7 @@ def entry() -> None:
     After Ctrl-C the status is 130 even where a library saw the interrupt on its way out (CPython
     then re-raises SIGINT at exit): everything was cleaned up already, so the exit is immediate.
     """
-    status = main()
+    status = _command(None)  # where the work is done, Ctrl-C stays held off until the exit
     # The work is done (or cleaned up): a Ctrl-C now, while the interpreter shuts down, must not
     # turn the outcome into a traceback or a death by SIGINT.
     signal.signal(signal.SIGINT, signal.SIG_IGN)

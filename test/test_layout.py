@@ -13,7 +13,7 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "neforward_ros"
 
 LAYERS = (
-    ("errors", "logs", "stamps", "rotations", "terminal", "disk_cache", "resources"),
+    ("errors", "logs", "stamps", "rotations", "terminal", "ctrl_c", "disk_cache", "resources"),
     ("model",),
     ("kinematics", "wire"),
     ("estimation",),

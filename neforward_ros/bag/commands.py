@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from neforward_ros import ctrl_c
 from neforward_ros.bag.arguments import parameter_values
 from neforward_ros.bag.fleet import is_recording, plan, process_fleet, recordings, summary
 from neforward_ros.bag.options import BagOptions
@@ -34,18 +35,11 @@ def run_bag(args: argparse.Namespace) -> int:
         output = Path(args.output)
         csv = _beside(output, args.csv, ".csv")
         plot = _beside(output, args.plot, ".png")
-        try:
-            report = process_bag(inputs[0], output, options, csv_path=csv, plot_path=plot, progress=Progress())
-        except KeyboardInterrupt:
-            # Every output is moved into place at once, with Ctrl-C held off (process_bag): if they are
-            # there, the run was done before the interrupt took effect.
-            if not output.exists():
-                raise
-            return 0
-        try:
-            print(describe(report))
-        except KeyboardInterrupt:
-            pass  # the outputs are done: saying so is all that was left
+        # Ctrl-C is held off from the moment every output is in place (on_done): the run is done
+        report = process_bag(
+            inputs[0], output, options, csv_path=csv, plot_path=plot, progress=Progress(), on_done=ctrl_c.hold
+        )
+        print(describe(report))
         return 0
     if args.csv or args.plot:
         raise InputError("with several recordings, --csv and --plot take no path: each output gets NAME.csv, NAME.png")

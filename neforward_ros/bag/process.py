@@ -36,8 +36,12 @@ def process_bag(
     csv_path: str | Path | None = None,
     plot_path: str | Path | None = None,
     progress: Callable[[str, float], None] | None = None,
+    on_done: Callable[[], None] | None = None,
 ) -> BagReport:
     """Compute the node's outputs for a whole recording and write them.
+
+    ``on_done`` is called once every output is in place, while SIGINT and SIGTERM are still held off
+    (the executable ignores Ctrl-C from there: :func:`neforward_ros.ctrl_c.hold`).
 
     Raises:
         InputError: no such file, not a rosbag2 recording, no joint-state topic (the message lists
@@ -168,6 +172,8 @@ def process_bag(
             # the staging folder too, while Ctrl-C is held off: one taken after the outputs are in place
             # ends the run as done (exit 0), and must not leave the folder behind
             shutil.rmtree(recording_writer.staging, ignore_errors=True)
+            if on_done is not None:
+                on_done()
             for pending in signal.sigpending() & stops:
                 signal.sigwait({pending})
         finally:
