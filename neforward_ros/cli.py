@@ -126,8 +126,9 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """The command; returns its exit status (130 after Ctrl-C, as shells count it).
 
-    Run in-process, it leaves SIGINT's handler as it found it (a command whose work is done ignores
-    Ctrl-C from then, :mod:`neforward_ros.ctrl_c`).
+    Run in-process, it leaves SIGINT's handler and ``sys.unraisablehook`` as it found them (a command
+    sees a Ctrl-C met in a finalizer again, and ignores one once its work is done:
+    :mod:`neforward_ros.ctrl_c`).
     """
     try:
         return _command(argv)
@@ -226,6 +227,7 @@ def _ctrl_c_raises() -> None:
     command = sys.modules.get("neforward_ros.command")
     if command is not None and signal.getsignal(signal.SIGINT) is command.interrupted_early:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+    ctrl_c.acted_on()
 
 
 def _interrupted(exc: BaseException) -> bool:

@@ -1,29 +1,62 @@
-"""Ctrl-C once a command's work is done: taken, not acted on.
+"""Ctrl-C as a command's KeyboardInterrupt: never lost in a finalizer, and taken, not acted on, once
+the command's work is done.
 
-Python turns SIGINT into a KeyboardInterrupt wherever the main thread happens to be. Once a
-command's outputs are in place, that can be a finalizer (a ``weakref.finalize`` run as the model is
-freed, a ``__del__``), where Python can only print the exception with a traceback and go on: the run
-would end done, with exit status 0, and a traceback on the terminal. :func:`hold` ignores SIGINT from
-that moment; the executable keeps it so until it exits, and a command run in-process (a test calling
-:func:`neforward_ros.cli.main`) gets its handler back with :func:`release`.
+Python turns SIGINT into a KeyboardInterrupt wherever the main thread happens to be. That can be a
+finalizer (a ``weakref.finalize`` run as an object is freed, a ``__del__``, a weakref callback), where
+Python can only print the exception with a traceback and go on: the interrupt would be lost, and a
+run would end done (exit status 0) with a traceback on the terminal. So:
+
+- while a command runs (:func:`acted_on`), a KeyboardInterrupt that ends in a finalizer is not printed
+  but raised again in the main thread's next ordinary line, as a new Ctrl-C would be;
+- once its outputs are in place (:func:`hold`), SIGINT is ignored; the executable keeps it so until it
+  exits.
+
+:func:`release` puts back what the two changed (a command run in-process, by a test calling
+:func:`neforward_ros.cli.main`).
 """
 
 from __future__ import annotations
 
+import _thread
 import signal
+import sys
 import threading
 from typing import Any
 
-_held: list[Any] = []  # the SIGINT handler put aside by hold(), while it holds
+_handler: list[Any] = []  # the SIGINT handler put aside by hold(), while it holds
+_hook: list[Any] = []  # the unraisable hook put aside by acted_on(), while it is in place
+
+
+def _unraisable(unraisable: Any) -> None:
+    """sys.unraisablehook: a KeyboardInterrupt met in a finalizer goes to the main thread again."""
+    if isinstance(unraisable.exc_value, KeyboardInterrupt):
+        # From another thread: in this one, the interrupt would come up at once, inside this hook. The
+        # main thread takes it at its next line (in another finalizer, it comes here again); where
+        # SIGINT is ignored by then (held), it does nothing.
+        try:
+            _thread.start_new_thread(_thread.interrupt_main, (signal.SIGINT,))
+        except RuntimeError:  # no new thread at the interpreter's shutdown: the command is over
+            pass
+        return
+    (_hook[0] if _hook else sys.__unraisablehook__)(unraisable)
+
+
+def acted_on() -> None:
+    """From now on a KeyboardInterrupt met in a finalizer is raised again instead of printed."""
+    if not _hook:
+        _hook.append(sys.unraisablehook)
+        sys.unraisablehook = _unraisable
 
 
 def hold() -> None:
     """From now on SIGINT is ignored (in the main thread only, where handlers can change; once)."""
-    if threading.current_thread() is threading.main_thread() and not _held:
-        _held.append(signal.signal(signal.SIGINT, signal.SIG_IGN))
+    if threading.current_thread() is threading.main_thread() and not _handler:
+        _handler.append(signal.signal(signal.SIGINT, signal.SIG_IGN))
 
 
 def release() -> None:
-    """The SIGINT handler that :func:`hold` put aside, back in place (nothing if it holds nothing)."""
-    if _held and threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, _held.pop())
+    """What :func:`acted_on` and :func:`hold` changed, put back."""
+    if _handler and threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, _handler.pop())
+    if _hook:
+        sys.unraisablehook = _hook.pop()

@@ -216,37 +216,61 @@ import os, signal, sys, weakref
 from neforward_ros import cli
 from neforward_ros.bag import commands
 
+
+def ctrl_c_in_a_finalizer():
+    # a Ctrl-C landing while a finalizer runs (seen in CI, 2026-11-27: the weakref.finalize of an
+    # object freed as the run ended)
+    weakref.finalize(type("Freed", (), {})(), os.kill, os.getpid(), signal.SIGINT)
+
+
+class Progress(commands.Progress):
+    def __call__(self, stage, fraction):
+        if stage == STAGE and not getattr(self, "sent", False):
+            self.sent = True
+            ctrl_c_in_a_finalizer()
+        return super().__call__(stage, fraction)
+
+
 described = commands.describe
 
 
-def describe(report):
-    # a Ctrl-C landing while a finalizer runs, after every output is in place (seen in CI, 2026-11-27:
-    # the weakref.finalize of an object freed as the run ended)
-    weakref.finalize(type("Freed", (), {})(), os.kill, os.getpid(), signal.SIGINT)
+def describe(report):  # after every output is in place
+    if STAGE == "done":
+        ctrl_c_in_a_finalizer()
     return described(report)
 
 
-commands.describe = describe
+commands.Progress, commands.describe = Progress, describe
 sys.argv[1:] = ARGUMENTS
 cli.entry()
 """
 
 
-def test_ctrl_c_once_the_outputs_are_in_place_is_taken_without_a_traceback(long_recording, tmp_path) -> None:
-    """Before: the KeyboardInterrupt came up inside the finalizer, where Python prints it as "Exception
-    ignored" with a traceback and goes on; the run ended done (0) with the traceback on the terminal."""
+@pytest.mark.parametrize("stage", ["computing", "done"])
+def test_ctrl_c_in_a_finalizer_is_not_lost(long_recording, tmp_path, stage: str) -> None:
+    """Python prints a KeyboardInterrupt met in a finalizer as "Exception ignored", with a traceback,
+    and goes on: before, a run interrupted so went on to finish (exit 0, with the traceback). Now one
+    while computing stops the run as any Ctrl-C does, and one once the outputs are in place is taken
+    and not acted on."""
     arguments = ["bag", str(long_recording), "-o", "out", "--csv"]
-    script = CTRL_C_IN_A_FINALIZER.replace("ARGUMENTS", repr(arguments))
+    script = CTRL_C_IN_A_FINALIZER.replace("ARGUMENTS", repr(arguments)).replace("STAGE", repr(stage))
     done = subprocess.run(
         [sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=300,
         preexec_fn=default_sigint,
     )  # fmt: skip
-    assert done.returncode == 0, done.stderr
-    assert "Traceback" not in done.stderr and "KeyboardInterrupt" not in done.stderr, done.stderr
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "out.csv"]
-    # in-process, the command leaves SIGINT's handler as it found it
-    handler = signal.getsignal(signal.SIGINT)
+    assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr
+    if stage == "done":
+        assert done.returncode == 0, done.stderr
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "out.csv"]
+    else:
+        assert done.returncode == 130, done.stderr
+        assert done.stderr.strip().split("\n")[-1].split("\r")[-1] == "neforward: interrupted", done.stderr
+        assert list(tmp_path.iterdir()) == []
+
+
+def test_main_in_process_leaves_ctrl_c_as_it_found_it(long_recording, tmp_path) -> None:
     from neforward_ros.cli import main
 
-    assert main(["bag", str(long_recording), "-o", str(tmp_path / "again")]) == 0
-    assert signal.getsignal(signal.SIGINT) is handler
+    handler, hook = signal.getsignal(signal.SIGINT), sys.unraisablehook
+    assert main(["bag", str(long_recording), "-o", str(tmp_path / "out")]) == 0
+    assert signal.getsignal(signal.SIGINT) is handler and sys.unraisablehook is hook
