@@ -105,15 +105,31 @@ ROUGHNESS = 0.01
 _GAIN = math.sqrt(2.0 / math.pi)  # mean |N(0, 1)|
 DIVISORS = native_fit.DIVISORS
 """An encoder's step is sought as the smallest change between consecutive samples of a window divided by
-1, 2 ... this (:func:`grid_step`): a joint that moves a few steps between its readings may change by
-two steps or more at every one of them. A driver that stamps at writing and writes in bursts (ten
-samples 20 us apart every 15 ms) shows it most: its samples repeat within a burst, and a joint's
-smallest change is what it moved between bursts; its sixth differences, mostly within bursts, read
-almost no noise, and a window of three bursts was fitted as if exact (q'' 259 rad/s^2 for 3). A fraction
-of the smallest change is taken only where the sixth differences are thus blind to the rounding
-(:data:`HIDDEN`): a joint creeping two or three steps a sample into a move's end, whose differences show
-its rounding, keeps the noise they read (taking the step there, its rounding counted as drawn afresh only
-at the window's few turns, cost the default 1.24x -> 1.63x hindsight on a minimum-jerk move at 100 Hz)."""
+1, then by the base divisor (:data:`EXACT`) times 1, 2 ... this (:func:`grid_step`): a joint that moves
+a few steps between its readings may change by two steps or more at every one of them. A driver that
+stamps at writing and writes in bursts (ten samples 20 us apart every 15 ms) shows it most: its samples
+repeat within a burst, and a joint's smallest change is what it moved between bursts; its sixth
+differences, mostly within bursts, read almost no noise, and a window of three bursts was fitted as if
+exact (q'' 259 rad/s^2 for 3). A fraction of the smallest change is taken only where the sixth
+differences are thus blind to the rounding (:data:`HIDDEN`): a joint creeping two or three steps a
+sample into a move's end, whose differences show its rounding, keeps the noise they read (taking the
+step there, its rounding counted as drawn afresh only at the window's few turns, cost the default
+1.24x -> 1.63x hindsight on a minimum-jerk move at 100 Hz)."""
+EXACT = native_fit.EXACT
+"""The base divisor of :func:`grid_step`: the least common multiple, for two changes (the smallest one
+above the smallest change, and the largest), of the smallest denominator q among the continued
+fraction's convergents of the change over the smallest change (r) that makes q r a whole number within
+this; 1 where none at most :data:`LARGEST_DIVISOR` does. An encoder's counts in float64 give r to about
+1e-12, and two fractions with denominators q, q' <= LARGEST_DIVISOR lie at least 1 / (q q') apart, so
+no smaller denominator than the reduced fraction's comes within this: the base is the step's own divisor
+or a divisor of it (a third change may lack a factor the two share: hence its multiples, up to
+:data:`DIVISORS`). A float32 conversion's rounding (up to 0.01 of a step) is not within it: there the
+base is 1, and the divisors 1, 2 ... DIVISORS. A 100 Hz writer stalled 30 ms at a time, 16 bits, shows
+why: a joint moving 14-145 steps between bursts, its step 1/14 of its smallest change; with eight
+divisors it was not found, the noise read nothing, and the causal settings' one-sided fits took a step
+crossed within a burst for a slope (q'' 220 rad/s^2 for 0.86, 25 stated deviations off)."""
+LARGEST_DIVISOR = native_fit.LARGEST_DIVISOR
+"""The largest divisor of the smallest change :func:`grid_step` tries (:data:`EXACT`)."""
 HIDDEN = native_fit.HIDDEN
 """The fraction of a grid's rounding (step / sqrt(12)) below which the noise read from the sixth
 differences is taken as blind to it (:data:`DIVISORS`); bunched stamps read a millionth of it."""
@@ -192,19 +208,95 @@ def grid_step(
 ) -> np.ndarray:
     """The step of the encoder's grid that the samples whose consecutive differences are ``differences``
     (..., k, n) lie on (:func:`on_grid`), (..., n): their ``smallest`` non-zero change (..., n) where
-    they lie on its grid; else the largest of it divided by 2, 3 ... :data:`DIVISORS` that they lie on,
-    where the noise read from their sixth differences, ``white`` (..., n), is below :data:`HIDDEN` of
-    that step's rounding (step / sqrt(12)); 0 elsewhere. ``inside``: as for :func:`on_grid`."""
+    they lie on its grid; else the largest of it divided by the :func:`base_divisor` times 1, 2 ...
+    :data:`DIVISORS` (at most :data:`LARGEST_DIVISOR`) that they lie on, where the noise read from their
+    sixth differences, ``white`` (..., n), is below :data:`HIDDEN` of that step's rounding (step /
+    sqrt(12)); 0 elsewhere. ``inside``: as for :func:`on_grid`."""
     step = np.where(on_grid(differences, smallest, inside), smallest, 0.0)
     # a smaller fraction's rounding is smaller still: where even a half's is not hidden, none is
     hidden = (step == 0.0) & (white < HIDDEN * (smallest / 2) * _ROUNDING)
     if not hidden.any():
         return step
-    for divisor in range(DIVISORS, 1, -1):  # the largest step last: it stands where several fit
+    base = base_divisor(differences, smallest, inside)
+    for multiple in range(DIVISORS, 0, -1):  # the largest step last: it stands where several fit
+        divisor = base * multiple
+        tried = hidden & (divisor >= 2.0) & (divisor <= LARGEST_DIVISOR)
+        if not tried.any():
+            continue
         candidate = smallest / divisor
-        fits = hidden & on_grid(differences, candidate, inside) & (white < HIDDEN * candidate * _ROUNDING)
+        fits = tried & on_grid(differences, candidate, inside) & (white < HIDDEN * candidate * _ROUNDING)
         step = np.where(fits, candidate, step)
     return step
+
+
+def base_divisor(differences: np.ndarray, smallest: np.ndarray, inside: np.ndarray | None = None) -> np.ndarray:
+    """(..., n): the least common multiple of :func:`exact_denominator` of two changes over the smallest,
+    ``smallest`` (..., n), among ``differences`` (..., k, n) (``inside`` as for :func:`on_grid`): the
+    smallest change above it by more than :data:`EXACT` of it, and the largest (:data:`EXACT`); 1 where
+    neither gives one, 0 where it exceeds :data:`LARGEST_DIVISOR`."""
+    size = np.abs(differences)
+    if inside is not None:
+        size = np.where(inside[..., None], size, 0.0)
+    ratio = size / np.where(smallest > 0.0, smallest, 1.0)[..., None, :]
+    two = np.stack([np.min(np.where(ratio - 1.0 > EXACT, ratio, np.inf), axis=-2), np.max(ratio, axis=-2)])
+    denominators = exact_denominator(np.where(np.isfinite(two) & (two >= 1.0), two, 1.0))
+    base = np.lcm(*np.maximum(denominators, 1.0).astype(np.int64))
+    return np.where(base <= LARGEST_DIVISOR, base, 0).astype(float)
+
+
+_ONE_BY_ONE = 128
+
+
+def _denominator(ratio: float) -> float:
+    """:func:`exact_denominator` of one ratio (the compiled reading's arithmetic)."""
+    if abs(ratio - round(ratio)) <= EXACT:
+        return 1.0
+    before, now, rest = 0.0, 1.0, ratio - math.floor(ratio)
+    for _ in range(native_fit.CONVERGENTS):
+        if not (rest > 0.0 and now <= LARGEST_DIVISOR):
+            return 0.0
+        inverse = 1.0 / rest
+        if inverse == math.inf:  # rest below 1e-308: as numpy and C go on, no denominator
+            return 0.0
+        term = float(math.floor(inverse))
+        rest = inverse - term
+        before, now = now, term * now + before
+        product = now * ratio
+        if now <= LARGEST_DIVISOR and abs(product - round(product)) <= EXACT:
+            return now
+    return 0.0
+
+
+def exact_denominator(ratio: np.ndarray) -> np.ndarray:
+    """The smallest denominator q of the continued fraction's convergents of ``ratio`` (at least 1)
+    with q ratio a whole number within :data:`EXACT`, up to :data:`LARGEST_DIVISOR`; 0 where none.
+    A few ratios (one window's) are expanded one by one, with the same arithmetic: numpy's calls on
+    small arrays cost more than the sums."""
+    if ratio.size <= _ONE_BY_ONE:
+        return np.array([_denominator(x) for x in ratio.reshape(-1).tolist()]).reshape(ratio.shape)
+    found = np.where(np.abs(ratio - np.round(ratio)) <= EXACT, 1.0, 0.0)
+    open_ = np.flatnonzero(found == 0.0)  # the ratios still being expanded, and their terms so far
+    x = ratio.reshape(-1)[open_]
+    rest = x - np.floor(x)
+    before, now = np.zeros_like(x), np.ones_like(x)  # the convergents' denominators
+    flat = found.reshape(-1)
+    for _ in range(native_fit.CONVERGENTS):
+        going = (rest > 0.0) & (now <= LARGEST_DIVISOR)
+        if not going.all():
+            open_, x, rest, before, now = open_[going], x[going], rest[going], before[going], now[going]
+        if not len(x):
+            break
+        with np.errstate(over="ignore", invalid="ignore"):  # a rest below 1e-308: inf, then NaN (dropped)
+            inverse = 1.0 / rest
+            term = np.floor(inverse)
+            rest = inverse - term
+            before, now = now, term * now + before
+        product = now * x
+        exact = (now <= LARGEST_DIVISOR) & (np.abs(product - np.round(product)) <= EXACT)
+        if exact.any():
+            flat[open_[exact]] = now[exact]
+            rest[exact] = 0.0  # done
+    return found
 
 
 def on_grid(differences: np.ndarray, step: np.ndarray, inside: np.ndarray | None = None) -> np.ndarray:

@@ -40,7 +40,15 @@ from neforward_ros.estimation.fit import LEAST_PIVOT, ROUNDING_PIVOT
 from neforward_ros.kinematics import native
 
 DIVISORS = 8
-"""The divisors of the smallest change tried for an encoder's step (:data:`~.adaptive.DIVISORS`)."""
+"""The multiples of the base divisor tried for an encoder's step (:data:`~.adaptive.DIVISORS`)."""
+EXACT = 1e-6
+"""How close to a whole number of a step two changes must be for their ratio to give it
+(:data:`~.adaptive.EXACT`)."""
+LARGEST_DIVISOR = 4096
+"""The largest divisor of the smallest change tried for an encoder's step (:data:`~.adaptive.EXACT`)."""
+CONVERGENTS = 24
+"""The continued fraction's terms taken for a ratio's denominator (the 24th convergent's is at least
+Fibonacci's F(25) = 75025, beyond :data:`LARGEST_DIVISOR`)."""
 HIDDEN = 0.1
 """Below this fraction of a fractional step's rounding, the noise read is blind to it
 (:data:`~.adaptive.HIDDEN`)."""
@@ -59,6 +67,9 @@ SOURCE = f"""
 #define LEAST_PIVOT {LEAST_PIVOT!r}  /* fit.LEAST_PIVOT */
 #define ROUNDING_PIVOT {ROUNDING_PIVOT!r}  /* fit.ROUNDING_PIVOT */
 #define DIVISORS {DIVISORS}  /* adaptive.DIVISORS */
+#define EXACT {EXACT!r}  /* adaptive.EXACT */
+#define LARGEST_DIVISOR {LARGEST_DIVISOR}.0  /* adaptive.LARGEST_DIVISOR */
+#define CONVERGENTS {CONVERGENTS}
 #define HIDDEN {HIDDEN!r}  /* adaptive.HIDDEN */
 """
 SOURCE += r"""
@@ -66,6 +77,45 @@ SOURCE += r"""
 #include <stdlib.h>
 
 #define MAX_ALSO 4  /* further degrees one call fits besides its own */
+
+static double exact_denominator(double ratio) {  /* adaptive.exact_denominator, for one ratio */
+    if (fabs(ratio - nearbyint(ratio)) <= EXACT) return 1.0;
+    double before = 0.0, now = 1.0, rest = ratio - floor(ratio);
+    for (int term = 0; term < CONVERGENTS; term++) {
+        if (!(rest > 0.0 && now <= LARGEST_DIVISOR)) return 0.0;
+        double inverse = 1.0 / rest, whole = floor(inverse), next = whole * now + before;
+        rest = inverse - whole;
+        before = now;
+        now = next;
+        double product = now * ratio;
+        if (now <= LARGEST_DIVISOR && fabs(product - nearbyint(product)) <= EXACT) return now;
+    }
+    return 0.0;
+}
+
+static long common_multiple(long a, long b) {
+    long x = a, y = b;
+    while (y != 0) { long r = x % y; x = y; y = r; }
+    return a / x * b;
+}
+
+/* adaptive.base_divisor, for one column (its samples `stride` apart) of `width` samples */
+static double base_divisor(const double *column, long width, long stride, double smallest) {
+    double above = INFINITY, largest = 0.0;
+    for (long i = 0; i + 1 < width; i++) {
+        double ratio = fabs(column[(i + 1) * stride] - column[i * stride]) / smallest;
+        if (ratio - 1.0 > EXACT && ratio < above) above = ratio;
+        if (ratio > largest) largest = ratio;
+    }
+    double ratios[2] = {above, largest};
+    long base = 1;
+    for (int k = 0; k < 2; k++) {
+        double ratio = isfinite(ratios[k]) && ratios[k] >= 1.0 ? ratios[k] : 1.0;
+        double denominator = exact_denominator(ratio);
+        base = common_multiple(base, denominator > 1.0 ? (long)denominator : 1);
+    }
+    return base <= (long)LARGEST_DIVISOR ? (double)base : 0.0;
+}
 
 static long lower_bound(const double *t, long count, double x) {  /* first index with t >= x */
     long lo = 0, hi = count;
@@ -336,14 +386,17 @@ static int fit_target(long count, const double *times, const double *values, lon
             }
         for (long j = 0; j < n; j++) {  /* an encoder's grid: each sample a whole number of steps from
                                             the first, and the changes not all one number of steps; the
-                                            step the smallest change over 1, 2 ... DIVISORS, the largest
-                                            that fits (grid_step) */
+                                            step the smallest change over 1, then over the base divisor
+                                            times 1, 2 ... DIVISORS, the largest that fits (grid_step) */
             fraction[j] = 0;
             if (!isfinite(step[j])) continue;
-            double smallest = step[j];
+            double smallest = step[j], base = 1.0;
             step[j] = INFINITY;
-            for (long divisor = 1; divisor <= DIVISORS && isinf(step[j]); divisor++) {
-                fraction[j] = divisor > 1;
+            for (long multiple = 0; multiple <= DIVISORS && isinf(step[j]); multiple++) {
+                if (multiple == 1) base = base_divisor(window + j, width, n, smallest);
+                double divisor = multiple == 0 ? 1.0 : base * (double)multiple;
+                if (multiple > 0 && !(divisor >= 2.0 && divisor <= LARGEST_DIVISOR)) continue;
+                fraction[j] = multiple > 0;
                 double candidate = smallest / divisor, position = 0.0, first = 0.0;
                 int varied = 0, off = 0;
                 for (long i = 0; i + 1 < width; i++) {

@@ -634,6 +634,12 @@ class StreamingEstimator:
         agree = np.abs(ours - theirs) <= GAMMA * np.hypot(spread, error)
         self._overruled[joints] = known & ~agree
         known &= agree
+        if guarded:  # the deviation stated with the chosen estimate is at least the part of its distance
+            # from the bank's that the bank's own deviation does not explain (their errors independent):
+            # the record is of targets where the samples came steadily, and after a gap (a writer's burst)
+            # a model the record trusts can be 40 of its recorded deviations off, well within the check
+            gap = ours - theirs
+            mine = (*mine[:3], np.fmax(error, np.sqrt(np.maximum(gap * gap - spread * spread, 0.0))), mine[4])
         if bank is not None and (chosen < 0).any():
             rule = tuple(np.where(chosen < 0, a, b) for a, b in zip(bank, rule, strict=True))
         return tuple(np.where(known, a, b) for a, b in zip(mine, rule, strict=True))
