@@ -264,7 +264,8 @@ def test_quantised_positions_at_bursty_stamps_are_as_good_as_at_regular_ones(set
 def test_slow_bunched_stamps_state_what_they_cannot_show(setting: str) -> None:
     """A 100 Hz writer stalled 30 ms at a time (three or four messages 40 us apart), 16 bits, and a 200 Hz
     one, 18 bits: every estimate after the first half second within six times its stated deviation plus
-    1 % of the joint's largest |q''| of the truth (3.7 at most in every setting, six seeds at 100 Hz).
+    1 % of the joint's largest |q''| of the truth (3.7 at most, every setting, four seeds at 100 Hz:
+    ``bench/bench_bunched_stamps.py --slow``).
     The causal settings' one-sided fits were 25 such units off at 100 Hz (q'' 220 rad/s^2 for 0.86)
     where the encoder's step, 1/14 of the smallest change, was not found; at 200 Hz, kalman 20 ms 12.6
     (a bank model chosen by its record, 4.1 rad/s^2 off after a gap, stated 0.09)."""
