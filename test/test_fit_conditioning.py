@@ -211,7 +211,8 @@ def fits_by(request, monkeypatch):
     return request.param
 
 
-def stream(times: np.ndarray, q: np.ndarray, settings: StreamSettings) -> tuple[np.ndarray, np.ndarray]:
+def stream(times: np.ndarray, q: np.ndarray, settings: StreamSettings) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(sample index, q'', its stated standard deviation) of each estimate, ``q`` fed one message at a time."""
     names = [f"j{k}" for k in range(q.shape[1])]
     logged = []
     estimator = StreamingEstimator(names, settings=settings, log=lambda level, message: logged.append(message))
@@ -219,7 +220,7 @@ def stream(times: np.ndarray, q: np.ndarray, settings: StreamSettings) -> tuple[
     out = [e for k in range(len(times)) for e in estimator.update(int(stamps[k]), names, q[k].tolist())]
     assert not [m for m in logged if "dropped" in m], logged
     at = np.searchsorted(stamps, [e.stamp_ns for e in out])
-    return at, np.array([e.accelerations for e in out])
+    return at, np.array([e.accelerations for e in out]), np.array([e.acceleration_std for e in out])
 
 
 @pytest.mark.parametrize("setting", list(SETTINGS))
@@ -230,7 +231,7 @@ def test_exact_positions_at_bursty_stamps(setting: str, fits_by: str) -> None:
     for seed in (0, 1):
         times = bunched_times(seed)
         q, qdd = sines(times, 1.0, np.random.default_rng(10 + seed), 3)
-        at, accelerations = stream(times, q, SETTINGS[setting])
+        at, accelerations, _ = stream(times, q, SETTINGS[setting])
         late = times[at] > 0.5
         assert late.sum() > 1000 and np.isfinite(accelerations[late]).all()
         worst = max(worst, np.max(np.abs(accelerations[late] - qdd[at[late]]) / np.abs(qdd).max(axis=0)))
@@ -250,7 +251,7 @@ def test_quantised_positions_at_bursty_stamps_are_as_good_as_at_regular_ones(set
         for times in (regular, bursty):
             q, qdd = sines(times, fmax, np.random.default_rng(100 + seed), 3)
             step = 2.0 * np.pi / 2**bits
-            at, accelerations = stream(times, np.round(q / step) * step, SETTINGS[setting])
+            at, accelerations, _ = stream(times, np.round(q / step) * step, SETTINGS[setting])
             late = times[at] > 0.6
             error = accelerations[late] - qdd[at[late]]
             errors.append((np.sqrt(np.mean(error**2, axis=0)) / np.sqrt(np.mean(qdd**2, axis=0)),
@@ -273,15 +274,10 @@ def test_slow_bunched_stamps_state_what_they_cannot_show(setting: str) -> None:
         step = 2.0 * np.pi / 2**bits
         times = bunched_times(seed, rate=rate, seconds=3.0, period=0.03)
         q, qdd = sines(times, 1.0, np.random.default_rng(seed), 3)
-        names = ["a", "b", "c"]
-        estimator = StreamingEstimator(names, settings=SETTINGS[setting], log=lambda level, message: None)
-        stamps = EPOCH_NS + np.round(times * 1e9).astype(np.int64)
-        quantised = np.round(q / step) * step
-        out = [e for k in range(len(times)) for e in estimator.update(int(stamps[k]), names, quantised[k].tolist())]
-        at = np.searchsorted(stamps, [e.stamp_ns for e in out])
+        at, accelerations, stds = stream(times, np.round(q / step) * step, SETTINGS[setting])
         late = times[at] > 0.5
-        error = np.array([e.accelerations for e in out])[late] - qdd[at[late]]
-        stated = np.array([e.acceleration_std for e in out])[late]
+        error = accelerations[late] - qdd[at[late]]
+        stated = stds[late]
         assert late.sum() > 200 and np.isfinite(error).all()
         largest = np.abs(qdd).max(axis=0)
         assert (np.abs(error) <= 6.0 * (stated + 0.01 * largest)).all(), (

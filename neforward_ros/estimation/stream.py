@@ -631,14 +631,14 @@ class StreamingEstimator:
         self._rule_spread[:, joints] = remembered
         self._rule_checked[joints] = target_s
         spread = np.fmax(rule[3], np.sqrt(self._rule_spread[0, joints] / self._rule_spread[1, joints]))
-        agree = np.abs(ours - theirs) <= GAMMA * np.hypot(spread, error)
+        gap = ours - theirs
+        agree = np.abs(gap) <= GAMMA * np.hypot(spread, error)
         self._overruled[joints] = known & ~agree
         known &= agree
         if guarded:  # the deviation stated with the chosen estimate is at least the part of its distance
             # from the bank's that the bank's own deviation does not explain (their errors independent):
             # the record is of targets where the samples came steadily, and after a gap (a writer's burst)
             # a model the record trusts can be 40 of its recorded deviations off, well within the check
-            gap = ours - theirs
             mine = (*mine[:3], np.fmax(error, np.sqrt(np.maximum(gap * gap - spread * spread, 0.0))), mine[4])
         if bank is not None and (chosen < 0).any():
             rule = tuple(np.where(chosen < 0, a, b) for a, b in zip(bank, rule, strict=True))
