@@ -246,6 +246,14 @@ cli.entry()
 """
 
 
+def run_script(script: str, cwd: Path) -> subprocess.CompletedProcess:
+    """``python -c script`` in ``cwd``, SIGINT at its default, its outputs captured."""
+    return subprocess.run(
+        [sys.executable, "-c", script], cwd=cwd, capture_output=True, text=True, timeout=300,
+        preexec_fn=default_sigint,
+    )  # fmt: skip
+
+
 @pytest.mark.parametrize("stage", ["computing", "done"])
 def test_ctrl_c_in_a_finalizer_is_not_lost(long_recording, tmp_path, stage: str) -> None:
     """Python prints a KeyboardInterrupt met in a finalizer as "Exception ignored", with a traceback,
@@ -254,10 +262,7 @@ def test_ctrl_c_in_a_finalizer_is_not_lost(long_recording, tmp_path, stage: str)
     and not acted on."""
     arguments = ["bag", str(long_recording), "-o", "out", "--csv"]
     script = CTRL_C_IN_A_FINALIZER.replace("ARGUMENTS", repr(arguments)).replace("STAGE", repr(stage))
-    done = subprocess.run(
-        [sys.executable, "-c", script], cwd=tmp_path, capture_output=True, text=True, timeout=300,
-        preexec_fn=default_sigint,
-    )  # fmt: skip
+    done = run_script(script, tmp_path)
     assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr
     if stage == "done":
         assert done.returncode == 0, done.stderr
@@ -274,3 +279,63 @@ def test_main_in_process_leaves_ctrl_c_as_it_found_it(long_recording, tmp_path) 
     handler, hook = signal.getsignal(signal.SIGINT), sys.unraisablehook
     assert main(["bag", str(long_recording), "-o", str(tmp_path / "out")]) == 0
     assert signal.getsignal(signal.SIGINT) is handler and sys.unraisablehook is hook
+
+
+CTRL_C_IN_A_FLEET = """
+import os, signal, sys
+from neforward_ros import cli
+from neforward_ros.bag import commands
+
+fleet, summarised = commands.process_fleet, commands.summary
+
+
+def process_fleet(jobs, options, workers, on_outcome, **rest):
+    def said(k, outcome):
+        said.count = getattr(said, "count", 0) + 1
+        if WHEN == "first" and said.count == 1:
+            os.kill(os.getpid(), signal.SIGINT)
+        on_outcome(k, outcome)
+
+    return fleet(jobs, options, workers, said, **rest)
+
+
+def summary(outcomes, seconds):  # every recording's outcome known, its outputs in place
+    if WHEN == "done":
+        os.kill(os.getpid(), signal.SIGINT)
+    return summarised(outcomes, seconds)
+
+
+commands.process_fleet, commands.summary = process_fleet, summary
+sys.argv[1:] = ARGUMENTS
+cli.entry()
+"""
+
+
+@pytest.fixture(scope="module")
+def two_recordings(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("fleet")
+    for name, seconds in (("a", 1.0), ("b", 6.0)):  # b still computing when a is done
+        record(folder / name, seconds=seconds)
+    return folder
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+@pytest.mark.parametrize("when", ["first", "done"])
+def test_ctrl_c_in_a_fleet_stops_it_until_every_recording_is_done(two_recordings, tmp_path, jobs: int, when: str):
+    """``neforward bag`` on several recordings: a Ctrl-C once every recording's outputs are in place is
+    taken and not acted on (before, it ended the finished run with 130), and one at the first
+    recording's outcome still stops the run, leaving whole outputs only and no worker's traceback
+    (before, a worker terminated while computing printed one)."""
+    arguments = ["bag", str(two_recordings), "-o", "out", "--jobs", str(jobs)]
+    script = CTRL_C_IN_A_FLEET.replace("ARGUMENTS", repr(arguments)).replace("WHEN", repr(when))
+    done = run_script(script, tmp_path)
+    assert "Traceback" not in done.stderr, done.stderr
+    if when == "done":
+        assert done.returncode == 0, done.stderr
+        assert "2 recordings in" in done.stdout and "2 done" in done.stdout, done.stdout
+        assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["a", "b"]
+    else:
+        assert done.returncode == 130, (done.stdout, done.stderr)
+        assert done.stderr.strip().split("\n")[-1] == "neforward: interrupted", done.stderr
+        left = sorted(p.name for p in (tmp_path / "out").iterdir())  # whole outputs only, no partial one
+        assert "a" in left and set(left) <= {"a", "b"}, left

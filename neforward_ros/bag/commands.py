@@ -64,7 +64,8 @@ def run_bag(args: argparse.Namespace) -> int:
             flush=True,
         )
 
-    outcomes = process_fleet(jobs, options, args.jobs, said)
+    # Ctrl-C is held off once every recording's outcome is known (on_done): the run is done
+    outcomes = process_fleet(jobs, options, args.jobs, said, on_done=ctrl_c.hold)
     print(summary(outcomes, time.monotonic() - started))
     return 1 if any(o.status == "failed" for o in outcomes) else 0
 

@@ -101,11 +101,13 @@ def plan(inputs: Sequence[Path], output_dir: Path, csv: bool = False, plot: bool
     return jobs
 
 
-def run_job(job: Job, options: BagOptions) -> Outcome:
+def run_job(job: Job, options: BagOptions, on_done: Callable[[], None] | None = None) -> Outcome:
     """Process one recording; never raises for a bad recording (the outcome says what went wrong).
 
     A job whose outputs all exist is skipped; one with only some of them fails and names them, as
     they were not written by this job (every run moves all of a job's outputs into place together).
+    ``on_done``: as for :func:`~neforward_ros.bag.process.process_bag`, called once the job's outputs
+    are in place (not for a job skipped or failed).
     """
     from neforward_ros.bag.process import process_bag
 
@@ -117,7 +119,7 @@ def run_job(job: Job, options: BagOptions) -> Outcome:
         return Outcome(job, "failed", f"{names} exist(s) but not every output asked for; remove them to redo it")
     started = time.monotonic()
     try:
-        report = process_bag(job.input, job.output, options, csv_path=job.csv, plot_path=job.plot)
+        report = process_bag(job.input, job.output, options, csv_path=job.csv, plot_path=job.plot, on_done=on_done)
     except NeforwardError as exc:
         return Outcome(job, "failed", str(exc), seconds=time.monotonic() - started)
     except Exception as exc:  # a recording the readers choke on must not stop the fleet
@@ -130,17 +132,26 @@ def process_fleet(
     options: BagOptions,
     workers: int | None = None,
     on_outcome: Callable[[int, Outcome], None] | None = None,
+    on_done: Callable[[], None] | None = None,
 ) -> list[Outcome]:
     """Every job, ``workers`` at once in a process pool (default: one per core), in the jobs' order.
 
     An interrupt (Ctrl-C, SIGTERM) stops the workers, which remove what they had half written, and
-    is raised again as KeyboardInterrupt: the jobs finished so far stay done.
+    is raised again as KeyboardInterrupt: the jobs finished so far stay done. ``on_done`` is called
+    once every job's outcome is known, before the last is handed to ``on_outcome`` (the executable
+    ignores Ctrl-C from there: :func:`neforward_ros.ctrl_c.hold`); in one process, where the last job
+    moves its outputs into place (as :func:`~neforward_ros.bag.process.process_bag` calls it), or
+    after it where it was skipped or failed.
     """
     workers = max(1, min(workers or os.cpu_count() or 1, len(jobs)))
     outcomes: list[Outcome | None] = [None] * len(jobs)
+    done = on_done if on_done is not None else _nothing
     if workers == 1:
         for k, job in enumerate(jobs):
-            outcomes[k] = run_job(job, options)
+            last = k == len(jobs) - 1
+            outcomes[k] = run_job(job, options, on_done=done if last else None)
+            if last:
+                done()  # (again, where the job moved its outputs: holding twice holds)
             if on_outcome is not None:
                 on_outcome(k, outcomes[k])  # type: ignore[arg-type]
         return outcomes  # type: ignore[return-value]
@@ -148,8 +159,12 @@ def process_fleet(
         workers, initializer=_worker_started
     )
     try:
+        received = 0
         for k, outcome in pool.imap_unordered(_run_numbered, [(k, job, options) for k, job in enumerate(jobs)]):
             outcomes[k] = outcome
+            received += 1
+            if received == len(jobs):
+                done()
             if on_outcome is not None:
                 on_outcome(k, outcome)
         pool.close()
@@ -161,22 +176,38 @@ def process_fleet(
     return outcomes  # type: ignore[return-value]
 
 
+def _nothing() -> None:
+    pass
+
+
 def _run_numbered(item: tuple[int, Job, BagOptions]) -> tuple[int, Outcome]:
     k, job, options = item
-    return k, run_job(job, options)
+    try:
+        _in_job.append(k)
+        try:
+            return k, run_job(job, options)
+        finally:
+            _in_job.clear()
+    except KeyboardInterrupt:  # terminated (the job removed what it had half written): leave quietly
+        raise SystemExit(1) from None  # (multiprocessing prints any other exception's traceback)
+
+
+_in_job: list[int] = []  # in a worker: the job it is running, if any
 
 
 def _worker_started() -> None:
     # The parent decides when to stop: a terminal's Ctrl-C reaches the whole process group, and the
     # parent then terminates the pool. SIGTERM interrupts a job like Ctrl-C, so that it removes its
-    # partial outputs before the worker exits.
+    # partial outputs before the worker exits; between jobs the worker just exits.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _interrupt)
 
 
 def _interrupt(signum: int, frame: Any) -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    raise KeyboardInterrupt
+    if _in_job:
+        raise KeyboardInterrupt
+    raise SystemExit(1)
 
 
 def summary(outcomes: Sequence[Outcome], seconds: float) -> str:
