@@ -11,7 +11,9 @@ the allowed ones. One of them is Python's own: a signal while the interpreter it
 init_import_site" and exit code 1; nothing of ours can run earlier. The subprocesses start with
 SIGINT at its default whatever the suite inherited (a background job of a non-interactive shell
 ignores it, and so would they). The only time bounds are generous timeouts; how fast Ctrl-C takes
-effect is measured by ``bench/bench_interrupts.py``.
+effect is measured by ``bench/bench_interrupts.py``. Ctrl-C met in a finalizer and on a fleet of
+recordings is sent by the process itself, from a script that wraps the command's functions, at the
+moment each test names.
 """
 
 from __future__ import annotations
