@@ -32,8 +32,6 @@ from bench_transients import SETTINGS  # every documented setting
 from bench_write_jitter import estimates
 from motion_family import bunched_times, sines
 
-from neforward_ros.estimation.stream import StreamingEstimator
-
 CASES = ((1.0, 16, 0.015), (3.0, 14, 0.015), (0.5, 18, 0.03))
 """(fastest sine Hz, encoder bits, the writer's period s)."""
 SEEDS = range(6)
@@ -65,16 +63,11 @@ def slow_writer() -> None:
                 stamps_s = bunched_times(seed, rate=100.0, seconds=3.0, period=period)
                 q, qdd = sines(stamps_s, 1.0, np.random.default_rng(seed), 3)
                 step = 2 * np.pi / 2**bits
-                names = ["a", "b", "c"]
-                estimator = StreamingEstimator(names, settings=settings, log=lambda level, message: None)
-                stamps = 10**18 + np.round(stamps_s * 1e9).astype(np.int64)
-                readings = (np.round(q / step) * step).tolist()
-                out = [e for k in range(len(stamps)) for e in estimator.update(int(stamps[k]), names, readings[k])]
-                at = np.searchsorted(stamps, [e.stamp_ns for e in out])
+                at, values, stds, _ = estimates(stamps_s, np.round(q / step) * step, settings, deviations=True)
                 keep = stamps_s[at] > 0.5
                 largest = np.abs(qdd).max(axis=0)
-                error = np.abs(np.array([e.accelerations for e in out])[keep] - qdd[at[keep]])
-                stated = np.array([e.acceleration_std for e in out])[keep]
+                error = np.abs(values[keep] - qdd[at[keep]])
+                stated = stds[keep]
                 worst.append(float(np.nanmax(error / largest)))
                 beyond.append(float(np.nanmax(error / (stated + 0.01 * largest))))
             print(

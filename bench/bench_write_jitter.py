@@ -40,19 +40,24 @@ def motion(kind: str, t: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarr
     return gait(t, rng, 3)
 
 
-def estimates(stamps_s: np.ndarray, q: np.ndarray, settings: StreamSettings):
+def estimates(stamps_s: np.ndarray, q: np.ndarray, settings: StreamSettings, deviations: bool = False):
     """(sample index (k,), q-ddot (k, n), the estimator) of a setting fed (stamps s, q) one message at
-    a time: the estimates every joint of which is ready."""
+    a time: the estimates every joint of which is ready; with ``deviations``, their stated standard
+    deviations (k, n) before the estimator."""
     names = [f"j{k}" for k in range(q.shape[1])]
     estimator = StreamingEstimator(names, settings=settings, log=lambda level, message: None)
     stamps = (stamps_s * 1e9).astype(np.int64) + EPOCH_NS
-    out: dict[int, np.ndarray] = {}
+    out: dict[int, tuple[np.ndarray, np.ndarray | None]] = {}
     for k in range(len(stamps)):
         for estimate in estimator.update(int(stamps[k]), names, q[k].tolist()):
             if estimate.ready.all():
-                out[estimate.stamp_ns] = estimate.accelerations
-    index = np.searchsorted(stamps, np.array(sorted(out)))
-    return index, np.array([out[s] for s in sorted(out)]), estimator
+                out[estimate.stamp_ns] = (estimate.accelerations, estimate.acceleration_std)
+    keys = sorted(out)
+    index = np.searchsorted(stamps, np.array(keys))
+    values = np.array([out[s][0] for s in keys])
+    if deviations:
+        return index, values, np.array([out[s][1] for s in keys]), estimator
+    return index, values, estimator
 
 
 def error(
