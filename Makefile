@@ -48,6 +48,8 @@ bench: $(VENV)/.installed-test $(if $(HAVE_ROS),$(ROS_VENV)/.installed)
 	$(BIN)/python bench/bench_kalman.py
 	$(BIN)/python bench/bench_causal_cost.py
 	$(BIN)/python bench/bench_realdata.py
+	$(BIN)/python bench/bench_panda_sigma.py
+	$(BIN)/python bench/bench_write_jitter.py
 	$(BIN)/python bench/bench_bag.py
 	$(BIN)/python bench/bench_bag.py --long
 	$(BIN)/python bench/bench_fit.py

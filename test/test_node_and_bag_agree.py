@@ -2,7 +2,8 @@
 base IMU, efforts, torques, wrenches, contact and world-frame states), what the node publishes for the
 recording's messages fed in their recording order and what ``neforward bag`` writes agree to 1e-9
 relative, stamp by stamp, on every topic; with the node's default estimator (the bag's
-whole-recording fit) and with a replayed one (causal)."""
+whole-recording fit) and with a replayed one (causal); and with the default on stamps written after the
+samples (the node's fits re-timed, the bag tool replaying)."""
 
 from __future__ import annotations
 
@@ -52,13 +53,28 @@ def recording(tmp_path_factory) -> Path:
     """3 s of trotting: joint states at 500 Hz (jittered stamps, positions, velocities and efforts
     that swing over and under the contact thresholds; some messages repeat the one before under a new
     stamp) and the IMU at 400 Hz, in stamp order."""
-    path = tmp_path_factory.mktemp("agree") / "trot"
+    rng = np.random.default_rng(3)
+    t = (np.arange(1500) + rng.uniform(-0.1, 0.1, 1500)) / 500.0
+    return write_trot(tmp_path_factory.mktemp("agree") / "trot", t, t, rng)
+
+
+@pytest.fixture(scope="module")
+def written_recording(tmp_path_factory) -> Path:
+    """The same motion sampled every 2 ms exactly and each message stamped when written, 0-0.8 ms later:
+    the node finds the stamps to be write times and fits on the clock it recovers; the bag tool replays
+    the recording through it."""
+    rng = np.random.default_rng(5)
+    sampled = np.arange(1500) / 500.0
+    written = sampled + rng.uniform(0.0, 0.0008, len(sampled))
+    return write_trot(tmp_path_factory.mktemp("agree") / "written", sampled, written, rng)
+
+
+def write_trot(path: Path, t_sampled: np.ndarray, t: np.ndarray, rng: np.random.Generator) -> Path:
+    """The recording: joint states sampled at ``t_sampled`` (s) and stamped ``t``; see :func:`recording`."""
     model = load_model(URDF)
     names = list(model.joint_names)
-    rng = np.random.default_rng(3)
-    count = 1500
-    t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
-    q, qd, _ = legs(t, model.joint_names)
+    count = len(t)
+    q, qd, _ = legs(t_sampled, model.joint_names)
     efforts = 8.0 * np.sin(2 * np.pi * 0.7 * t[:, None] + np.arange(len(names))) + rng.normal(0, 0.05, q.shape)
     for first in range(40, count - 10, 41):  # a driver's repeated readings, runs of 1 to 3, under new stamps
         for i in range(first, first + 1 + first % 3):
@@ -139,6 +155,17 @@ def numbers(contents) -> list[float]:
 
 @pytest.mark.parametrize("flags", [[], ["-p", "estimator.mode:=causal"]], ids=["default", "causal"])
 def test_the_node_and_the_bag_tool_agree_stamp_by_stamp(recording, tmp_path, flags) -> None:
+    agree(recording, tmp_path, flags)
+
+
+def test_the_node_and_the_bag_tool_agree_on_stamps_written_after_the_samples(written_recording, tmp_path) -> None:
+    """The default setting on write stamps: the node re-times its fits (:mod:`~neforward_ros.estimation.clock`),
+    the bag tool replays the recording through it (its whole-recording fit, on the stamps, would not agree)."""
+    agree(written_recording, tmp_path, [])
+
+
+def agree(recording: Path, tmp_path: Path, flags: list[str]) -> None:
+    """The node's and the bag tool's outputs on ``recording`` with these bag flags, stamp by stamp."""
     parameters = {"estimator.mode": "causal"} if flags else {}
     node = node_outputs(recording, parameters)
     bag = bag_outputs(recording, tmp_path / "out", flags)

@@ -29,6 +29,7 @@ from neforward_ros.computation.raw_samples import RawAssembler
 from neforward_ros.computation.result import Observation, Result
 from neforward_ros.estimation.adaptive import pooled_std
 from neforward_ros.estimation.batch import estimate_at
+from neforward_ros.estimation.clock import written_from
 from neforward_ros.estimation.coverage import covered_mask
 from neforward_ros.estimation.repeats import repeated
 from neforward_ros.model import RobotModel
@@ -76,10 +77,11 @@ def prepare_inputs(recording: Recording, options: BagOptions, progress: Callable
         segment_stamps = recording.stamps[start:stop]
         segment = Segment(int(segment_stamps.min()), int(segment_stamps.max()), stop - start)
         recording.report.segments.append(segment)
-        if options.streamed:
+        whole = None if options.streamed else _whole(recording, start, stop, options)
+        if whole is None:
             states, log_times, base, absent = _replayed(recording, start, stop, options)
         else:
-            states, log_times, absent = _whole(recording, start, stop, options)
+            states, log_times, absent = whole
             base = None
             if recording.base is not None:
                 states, log_times, base = _with_base(recording, start, stop, states, log_times, options)
@@ -189,9 +191,12 @@ def results(
 
 def _whole(
     recording: Recording, start: int, stop: int, options: BagOptions
-) -> tuple[JointStates, np.ndarray, list[str]]:
+) -> tuple[JointStates, np.ndarray, list[str]] | None:
     """One segment's joint states at every message stamp from the whole-recording estimator, their
-    recording times, and the joints with too few samples.
+    recording times, and the joints with too few samples; None where some joints' stamps are write
+    times (:class:`~neforward_ros.estimation.clock.SampleClock`, fed their samples as the node feeds
+    it): from there on the node fits them on the clock it recovers, and the segment is replayed
+    through it (:func:`_replayed`).
 
     As in the node, a joint has an estimate at a stamp only where its samples cover the estimator's
     support there (:mod:`neforward_ros.estimation.coverage`, the fixed-lag fit's) and none is more
@@ -228,14 +233,19 @@ def _whole(
         v = vs[inside][keep]
         use_velocity = settings.estimator.velocity_source != "differentiate" and bool(np.all(np.isfinite(v)))
         groups.setdefault((t_ns.tobytes(), use_velocity), []).append((j, q, v, es[inside][keep]))
+    samples = []  # per group: its members, whether fitted on velocities, stamps, positions, which are fresh
     for (t_bytes, use_velocity), members in groups.items():
         t_ns = np.frombuffer(t_bytes, dtype=np.int64)
-        reach = (t_ns - origin) / NS  # every sample's time, repeated readings too: how far the samples go
-        joints = [j for j, _, _, _ in members]
         q = np.stack([q for _, q, _, _ in members], axis=1)
-        v = np.stack([v for _, _, v, _ in members], axis=1)
         gap = np.r_[False, np.diff(t_ns) > settings.estimator.max_gap * NS]  # where the node restarts
         fresh = ~repeated(q, gap)  # a driver's repeated reading is no sample: the node leaves it out too
+        if written_from(t_ns[fresh], q[fresh], gap[fresh]) is not None:
+            return None
+        samples.append((members, use_velocity, t_ns, q, fresh))
+    for members, use_velocity, t_ns, q, fresh in samples:
+        reach = (t_ns - origin) / NS  # every sample's time, repeated readings too: how far the samples go
+        joints = [j for j, _, _, _ in members]
+        v = np.stack([v for _, _, v, _ in members], axis=1)
         t_ns, q, v = t_ns[fresh], q[fresh], v[fresh]
         for j, _, _, e in members:
             efforts[:, j] = _efforts_at(t_ns, e[fresh], targets)

@@ -131,6 +131,10 @@ class DegreePool:
         """Forget every estimate (a new stream)."""
         self._rows.clear()
 
+    def forget(self, joints: list[int]) -> None:
+        """Forget these joints' estimates so far (their samples' times changed: see :mod:`.clock`)."""
+        self._rows.window[:, :, joints] = 0.0
+
     def start(self, stamp_ns: int) -> None:
         """Begin the estimate at ``stamp_ns`` (after every earlier one); the estimates a second older
         are forgotten."""

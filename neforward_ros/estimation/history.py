@@ -6,6 +6,7 @@ from collections import deque
 
 import numpy as np
 
+from neforward_ros.estimation.clock import SampleClock
 from neforward_ros.estimation.kalman_bank import KalmanBank
 from neforward_ros.estimation.repeats import MOST_REPEATS, MOVING_STEPS, moving, stopped
 from neforward_ros.stamps import NS
@@ -18,15 +19,20 @@ class JointHistory:
     Attributes:
         joints: the joints' indices in the estimator, in the order of the buffer's columns.
         origin: the segment's first stamp; ``seconds`` are counted from it.
+        clock: where given, the times the samples are fitted at (:class:`~.clock.SampleClock`): the
+            stamps, or once they are found to be write times the clock recovered from them (the Kalman
+            bank, ``track``, keeps its own).
     """
 
     __slots__ = (
         "_efforts",
         "_positions",
+        "_recovered",
         "_seconds",
         "_stamps",
         "_velocities",
         "any_effort",
+        "clock",
         "end",
         "holes",
         "intervals",
@@ -42,9 +48,17 @@ class JointHistory:
         "warming",
     )
 
-    def __init__(self, joints: list[int], origin: int, capacity: int = 256, track: KalmanBank | None = None) -> None:
+    def __init__(
+        self,
+        joints: list[int],
+        origin: int,
+        capacity: int = 256,
+        track: KalmanBank | None = None,
+        clock: SampleClock | None = None,
+    ) -> None:
         self.joints = joints
         self.track = track
+        self.clock = clock
         self.holes: list[int] = []  # stamps of samples more than the support's max_hole after the previous one
         self.intervals: deque[int] = deque(maxlen=8)  # the last intervals between samples, ns
         self.warming: bool | str = False  # whether the current warm-up has been logged ("sparse": warned)
@@ -52,6 +66,7 @@ class JointHistory:
         self.origin = origin
         self._stamps = np.empty(capacity, dtype=np.int64)
         self._seconds = np.empty(capacity)
+        self._recovered = np.empty(capacity)  # the samples' times on the recovered clock, s since origin
         self._positions = np.empty((capacity, len(joints)))
         self._velocities = np.empty((capacity, len(joints)))
         self._efforts = np.empty((capacity, len(joints)))
@@ -73,9 +88,27 @@ class JointHistory:
         return self._stamps[self.start : self.end]
 
     @property
+    def written(self) -> bool:
+        """Whether the stamps were found to be write times (the samples' times are then the recovered clock's)."""
+        return self.clock is not None and self.clock.written
+
+    @property
     def seconds(self) -> np.ndarray:
-        """The stamps as seconds since the segment's first stamp."""
-        return self._seconds[self.start : self.end]
+        """The samples' times, s since the segment's first stamp: their stamps', or the recovered clock's
+        where the stamps are write times."""
+        times = self._recovered if self.written else self._seconds
+        return times[self.start : self.end]
+
+    def time_of(self, stamp_ns: int) -> float:
+        """The time (s since the segment's first stamp) that a stamp stands for on the samples' clock (see
+        :attr:`seconds`): the stamp's own, or where the stamps are write times that of the newest sample
+        at or before it on the recovered clock, plus the time since (the oldest sample's, less the time
+        to it, before every sample)."""
+        if not self.written:
+            return (stamp_ns - self.origin) / NS
+        stamps = self.stamps
+        k = max(int(stamps.searchsorted(stamp_ns, side="right")) - 1, 0)
+        return float(self._recovered[self.start + k]) + (stamp_ns - int(stamps[k])) / NS
 
     @property
     def positions(self) -> np.ndarray:
@@ -153,7 +186,7 @@ class JointHistory:
         from the message before is counted."""
         if self.end == len(self._stamps):
             count = len(self)
-            arrays = ("_stamps", "_seconds", "_positions", "_velocities", "_efforts")
+            arrays = ("_stamps", "_seconds", "_recovered", "_positions", "_velocities", "_efforts")
             if count > len(self._stamps) // 2:
                 for name in arrays:
                     old = getattr(self, name)
@@ -182,6 +215,8 @@ class JointHistory:
         self.end = end + 1
         if received:
             self.newest_received = stamp_ns
+        if self.clock is not None:
+            self._recovered[end] = (self.clock.add(stamp_ns, self._positions[end]) - self.origin) / NS
         if self.track is not None:
             self.track.add(stamp_ns, self._positions[end], self._velocities[end])
 
@@ -197,10 +232,12 @@ class JointHistory:
         """Move these joints, with their history, into a group of their own; returns it."""
         columns = [self.slots[j] for j in joints]
         track = self.track.select(columns) if self.track is not None else None
-        moved = JointHistory(joints, self.origin, capacity=max(len(self._stamps), 16), track=track)
+        clock = self.clock.select(columns) if self.clock is not None else None
+        moved = JointHistory(joints, self.origin, capacity=max(len(self._stamps), 16), track=track, clock=clock)
         count = len(self)
         moved._stamps[:count] = self.stamps
-        moved._seconds[:count] = self.seconds
+        moved._seconds[:count] = self._seconds[self.start : self.end]
+        moved._recovered[:count] = self._recovered[self.start : self.end]
         moved._positions[:count] = self.positions[:, columns]
         moved._velocities[:count] = self.velocities[:, columns]
         moved._efforts[:count] = self.efforts[:, columns]
@@ -221,6 +258,8 @@ class JointHistory:
         columns = [self.slots[j] for j in keep]
         if self.track is not None:
             self.track = self.track.select(columns)
+        if self.clock is not None:
+            self.clock = self.clock.select(columns)
         self._positions = self._positions[:, columns].copy()
         self._velocities = self._velocities[:, columns].copy()
         self._efforts = self._efforts[:, columns].copy()

@@ -27,7 +27,7 @@ changes), white noise over the last :data:`NOISE_WINDOW` samples, read again eve
 :data:`NOISE_EVERY` samples; the velocity noise likewise from the velocities the messages carry.
 
 The position noise is read on the stamps and on the clock recovered from them as if they were write
-times (:mod:`.clock`): where the latter reads far less (:data:`WRITTEN`), the driver stamps its
+times (:mod:`.clock`): where the latter reads far less (:data:`~.clock.WRITTEN`), the driver stamps its
 messages when it writes them, and the filters run on the recovered clock from then on (estimates and
 their stamps stay the messages'). A driver's write delays would otherwise read as noise that follows
 the velocity: 26 times the error on 20 ms, 41 times causal (``bench/bench_write_jitter.py``).
@@ -37,13 +37,12 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterable
 
 import numpy as np
 
 from neforward_ros.estimation import native_fit, native_kalman
 from neforward_ros.estimation.adaptive import noise_of
-from neforward_ros.estimation.clock import WriteClock
+from neforward_ros.estimation.clock import WriteClock, median_of_few, stamps_are_write_times
 from neforward_ros.estimation.kalman import KalmanTrack
 from neforward_ros.estimation.motion import TICK_NS, KalmanSettings, MotionModel, MotionModels, interval
 from neforward_ros.stamps import NS
@@ -72,12 +71,6 @@ NOISE_FLOOR = 1e-2
 variances are 1e2, a noise of 1e-8 rad would be 1e-16) and diverges."""
 FALLBACK_VELOCITY_NOISE = 1e-3
 """rad/s (m/s): likewise for the velocities."""
-WRITTEN = 0.5
-"""The most the position noise read on the recovered clock (:mod:`.clock`) may be, relative to that
-read on the stamps, for the stamps to be taken for write times: then, and from then on, the filter
-runs on the recovered clock. Where the stamps are the sample times, the recovered clock moves samples
-off them and its noise reads higher; where they are write times, several times lower
-(``bench/bench_write_jitter.py``)."""
 CHECK_EVERY = 4
 """Readings of the position noise between two checks of the recovered clock."""
 REVISION_MEMORY = 0.02
@@ -152,7 +145,7 @@ class KalmanBank:
 
     def add(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> None:
         """One sample of every joint (see :meth:`KalmanTrack.add`)."""
-        usual = _median(self._intervals) if len(self._intervals) >= 4 else None
+        usual = median_of_few(self._intervals) if len(self._intervals) >= 4 else None
         silence = self._last is not None and usual is not None and (stamp - self._last) / NS > 3.0 * usual
         if silence:
             # A silence: differences across it are motion, not noise. Read the noise afresh after it,
@@ -440,8 +433,8 @@ class KalmanBank:
                 the start say nothing of the noise and are left out of the median (with them, a group whose
                 other joints still rest would take a noise of zero and trust every sample beyond measure). Once
         the window is full, read every :data:`NOISE_EVERY` samples. The positions' noise is also read on
-        the recovered clock until the stamps are found to be write times (:data:`WRITTEN`), and only
-        there once they are."""
+        the recovered clock until the stamps are found to be write times
+        (:func:`~.clock.stamps_are_write_times`), and only there once they are."""
         if len(samples) < NOISE_WINDOW:
             known = self.known_noise.get(kind)
             if known is not None:
@@ -460,7 +453,7 @@ class KalmanBank:
             moving = white > fallback * NOISE_FLOOR
             if moving.any() and self._reads % CHECK_EVERY == 1:
                 on_clock, _ = noise_of(np.array([r for _, r, _ in samples]), values, coloured=False)
-                if _median_of(on_clock[moving]) < WRITTEN * _median_of(white[moving]):
+                if stamps_are_write_times(white, on_clock, moving):
                     self.written = True
                     white = on_clock
         seen = self._steps.get(kind)
@@ -499,19 +492,12 @@ class KalmanBank:
             self.track._velocity_noise = noise
 
 
-def _median(values: Iterable[float]) -> float:
-    """The median of a few numbers, without numpy's overhead."""
-    ordered = sorted(values)
-    middle = len(ordered) // 2
-    return ordered[middle] if len(ordered) % 2 else 0.5 * (ordered[middle - 1] + ordered[middle])
-
-
 def _median_of(values: np.ndarray) -> float:
     """numpy's median of a few numbers (NaN if any is), without its overhead."""
     listed = values.tolist()
     if any(value != value for value in listed):
         return math.nan
-    return _median(listed)
+    return median_of_few(listed)
 
 
 def _concrete(settings: KalmanSettings, length_scale: float) -> KalmanSettings:

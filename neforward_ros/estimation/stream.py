@@ -26,6 +26,7 @@ from neforward_ros.errors import InputError
 from neforward_ros.estimation import degree_choice, native_fit
 from neforward_ros.estimation.adaptive import FLOOR, GAMMA, DeviationPool, adaptive_fit, degree_fit
 from neforward_ros.estimation.causal_choice import DEGREES, ErrorScores, candidates, half_widths, usable
+from neforward_ros.estimation.clock import SampleClock
 from neforward_ros.estimation.coverage import uncovered
 from neforward_ros.estimation.estimate import JointEstimate
 from neforward_ros.estimation.fit import degrees, fit_window, local_difference
@@ -334,7 +335,12 @@ class StreamingEstimator:
             if group.repeats(stamp, *sample):
                 repeats += 1  # a driver's repeated reading (:mod:`.repeats`): no sample; its stamp is a target
                 continue
+            written = group.written
             group.append(stamp, *sample, self._hole_ns)
+            if group.written and not written:  # its samples now on the recovered clock: the records of the
+                self._forget_scores(group.joints)  # causal candidates and of the default's degrees were made on
+                if self._degrees is not None:  # the stamps'
+                    self._degrees.forget(group.joints)
             self._watch_innovations(group)
         if fresh:
             track = None
@@ -347,7 +353,10 @@ class StreamingEstimator:
                     seeded = None
                 track = KalmanBank(self.settings.kalman, smooth=self._lag_ns > 0, known_noise=noise,
                                    known_scores=seeded)  # fmt: skip
-            group = JointHistory(sorted(fresh), self._origin, track=track)
+            # the fits' samples on the clock recovered from the stamps where those are write times (the bank
+            # keeps its own)
+            clock = SampleClock() if track is None else None
+            group = JointHistory(sorted(fresh), self._origin, track=track, clock=clock)
             self._groups.append(group)
             for j in group.joints:
                 self._group_of[j] = group
@@ -471,7 +480,7 @@ class StreamingEstimator:
             group, target + lead_ns - self._window_ns, target + lead_ns
         )
         fitted_velocities = bool(by_velocity.any())
-        target_s = (target - self._origin) / NS
+        target_s = group.time_of(target)
         if fitted_velocities and exact:
             # One column per joint: its velocities where it has them all, else its positions.
             values = np.where(by_velocity, velocities, positions)
@@ -665,7 +674,7 @@ class StreamingEstimator:
         values = np.where(by_velocity, velocities, positions)
         derivative = np.where(by_velocity, 1, 2)
         order, lower = degrees(None, True, False)
-        _, d1, d2, _, _ = adaptive_fit(times, values, (stamp - self._origin) / NS, half, order, half, derivative, lower)
+        _, d1, d2, _, _ = adaptive_fit(times, values, group.time_of(stamp), half, order, half, derivative, lower)
         return np.where(by_velocity, d1, d2)
 
     @staticmethod
