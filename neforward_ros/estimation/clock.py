@@ -18,8 +18,8 @@ from the recovered time and the stamps' mean delay after it, so that delays up t
 the caller to tell: where the stamps are the sample times (a driver that stamps at sampling, jittered
 or not), the line would move samples off their times. :class:`SampleClock` tells it for a stream by the
 noise its positions read on both clocks (:func:`stamps_are_write_times`): the Kalman bank
-(:mod:`.kalman_bank`) and the fits' sample histories (:mod:`.history`) run on the recovered clock once
-it reads far less.
+(:mod:`.kalman_bank`) and the fits' sample histories (:mod:`.history`), each with a clock of its own, run
+on the recovered clock once it reads far less.
 """
 
 from __future__ import annotations
@@ -49,17 +49,17 @@ for the stamps to be taken for write times. Where the stamps are the sample time
 moves samples off them and its noise reads higher; where they are write times, several times lower
 (``bench/bench_write_jitter.py``)."""
 NOISE_SAMPLES = 128
-"""The newest samples a :class:`SampleClock` reads the noise from (64 in the Kalman bank)."""
+"""The newest samples a :class:`SampleClock` reads the noise from."""
 WRITTEN_AFTER = 3
 """Consecutive checks that must find the stamps to be write times for them to be taken for such. The
 Panda's recording (``../shared/realdata``), whose positions read a median 1.9 times more noise on the
 recovered clock than on the stamps, reads under :data:`WRITTEN` over a few stretches: fed from 250
 starts 16 samples apart, the clock took its stamps for write times from 133 of them with windows of 64
-samples and one check, 40 with 128 and one, 10 with 128 and two, 1 with 128 and three. Three checks find
+samples and one check (the Kalman bank's rule until 2026-11-28), 40 with 128 and one, 10 with 128 and
+two, 1 with 128 and three. Three checks find
 a writer's stamps (``bench/bench_write_jitter.py``) after 190-770 samples: about 2 s at 100 Hz."""
 CHECK_EVERY = 128
-"""Samples between two of a :class:`SampleClock`'s checks once it has seen :data:`SPAN` (as often as the
-Kalman bank checks)."""
+"""Samples between two of a :class:`SampleClock`'s checks once it has seen :data:`SPAN`."""
 EARLY_CHECK_EVERY = 32
 """Samples between two checks before: the line drawn from the first samples may not tell yet (1.5 Hz
 sines at 100 Hz, ``bench/bench_write_jitter.py``: the check at 64 samples reads 0.64 of the stamps'

@@ -21,7 +21,7 @@ class JointHistory:
         origin: the segment's first stamp; ``seconds`` are counted from it.
         clock: where given, the times the samples are fitted at (:class:`~.clock.SampleClock`): the
             stamps, or once they are found to be write times the clock recovered from them (the Kalman
-            bank, ``track``, keeps its own).
+            bank, ``track``, keeps one of its own, for its filters).
     """
 
     __slots__ = (

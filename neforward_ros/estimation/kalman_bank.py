@@ -26,11 +26,14 @@ encoder's step from the smallest non-zero change since the start (through dwells
 changes), white noise over the last :data:`NOISE_WINDOW` samples, read again every
 :data:`NOISE_EVERY` samples; the velocity noise likewise from the velocities the messages carry.
 
-The position noise is read on the stamps and on the clock recovered from them as if they were write
-times (:mod:`.clock`): where the latter reads far less (:data:`~.clock.WRITTEN`), the driver stamps its
-messages when it writes them, and the filters run on the recovered clock from then on (estimates and
-their stamps stay the messages'). A driver's write delays would otherwise read as noise that follows
-the velocity: 26 times the error on 20 ms, 41 times causal (``bench/bench_write_jitter.py``).
+Whether the driver stamps its messages when it writes them is told as the fits' sample histories tell
+it (:class:`~.clock.SampleClock`: the position noise read on the stamps and on the clock recovered from
+them, over checks that can tell); where it does, the filters run on the recovered clock from then on
+(estimates and their stamps stay the messages'). A driver's write delays would otherwise read as noise
+that follows the velocity: 26 times the error on 20 ms, 41 times causal (``bench/bench_write_jitter.py``).
+Until 2026-11-28 the bank told it by itself, from one check over 64 samples: the Panda's recording, its
+samples' own times, then read as write times 371 samples in, and the bank alone served it (its torque
+error up to 2.08 times the zero-phase reference's, 1.05 now).
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ import numpy as np
 
 from neforward_ros.estimation import native_fit, native_kalman
 from neforward_ros.estimation.adaptive import noise_of
-from neforward_ros.estimation.clock import WriteClock, median_of_few, stamps_are_write_times
+from neforward_ros.estimation.clock import SampleClock, median_of_few
 from neforward_ros.estimation.kalman import KalmanTrack
 from neforward_ros.estimation.motion import TICK_NS, KalmanSettings, MotionModel, MotionModels, interval
 from neforward_ros.stamps import NS
@@ -71,8 +74,6 @@ NOISE_FLOOR = 1e-2
 variances are 1e2, a noise of 1e-8 rad would be 1e-16) and diverges."""
 FALLBACK_VELOCITY_NOISE = 1e-3
 """rad/s (m/s): likewise for the velocities."""
-CHECK_EVERY = 4
-"""Readings of the position noise between two checks of the recovered clock."""
 REVISION_MEMORY = 0.02
 """The weight of each new fixed-lag estimate in a joint's mean normalised revision (about the last 50)."""
 
@@ -128,10 +129,9 @@ class KalmanBank:
         # (s, s on the recovered clock, values)
         self._positions: deque[tuple[float, float, np.ndarray]] = deque(maxlen=NOISE_WINDOW)
         self._velocities: deque[tuple[float, float, np.ndarray]] = deque(maxlen=NOISE_WINDOW)
-        self.clock = WriteClock()
+        self.clock = SampleClock()  # whether the stamps are write times, and the clock recovered from them
         self.written = False
         """Whether the stamps were found to be write times: the filter then runs on the recovered clock."""
-        self._reads = 0  # readings of the position noise while the stamps are taken for sample times
         self._models: deque[tuple[int, int]] = deque()  # (stamp, the filter's time) of the steps kept
         self._steps: dict[str, np.ndarray] = {}  # the smallest change seen so far, per joint: an encoder's step
         self.read_noise: dict[str, float] = {}  # the variances read from the samples so far
@@ -154,7 +154,8 @@ class KalmanBank:
             self._positions.clear()
             self._velocities.clear()
             # (the clock goes on: it counts the periods of a silence as of a dropped sample)
-        recovered = self.clock.update(stamp, usual)
+        recovered = self.clock.add(stamp, positions)
+        self.written = self.clock.written
         self._tune_noise(stamp, recovered, positions, velocities)
         model = stamp
         if self.written:  # the recovered time, after the filter's newest (which may be a stamp)
@@ -412,8 +413,8 @@ class KalmanBank:
         bank._origin = self._origin
         bank._positions = deque(((t, r, p[columns]) for t, r, p in self._positions), maxlen=NOISE_WINDOW)
         bank._velocities = deque(((t, r, v[columns]) for t, r, v in self._velocities), maxlen=NOISE_WINDOW)
-        bank.clock = self.clock.copy()
-        bank.written, bank._reads = self.written, self._reads
+        bank.clock = self.clock.select(columns)
+        bank.written = self.written
         bank._models = deque(self._models)
         bank._steps = {k: v[columns] for k, v in self._steps.items()}
         bank.revisions = None if self.revisions is None else self.revisions[columns]
@@ -432,9 +433,8 @@ class KalmanBank:
                 changes and the recent samples alone would say nothing). Joints that have not moved since
                 the start say nothing of the noise and are left out of the median (with them, a group whose
                 other joints still rest would take a noise of zero and trust every sample beyond measure). Once
-        the window is full, read every :data:`NOISE_EVERY` samples. The positions' noise is also read on
-        the recovered clock until the stamps are found to be write times
-        (:func:`~.clock.stamps_are_write_times`), and only there once they are."""
+        the window is full, read every :data:`NOISE_EVERY` samples; on the recovered clock once the stamps
+        are found to be write times (:attr:`written`)."""
         if len(samples) < NOISE_WINDOW:
             known = self.known_noise.get(kind)
             if known is not None:
@@ -448,14 +448,6 @@ class KalmanBank:
         values = np.stack([v for _, _, v in samples])
         times = np.array([r if self.written else t for t, r, _ in samples])
         white, step = noise_of(times, values, coloured=False)
-        if kind == "positions" and not self.written:
-            self._reads += 1
-            moving = white > fallback * NOISE_FLOOR
-            if moving.any() and self._reads % CHECK_EVERY == 1:
-                on_clock, _ = noise_of(np.array([r for _, r, _ in samples]), values, coloured=False)
-                if stamps_are_write_times(white, on_clock, moving):
-                    self.written = True
-                    white = on_clock
         seen = self._steps.get(kind)
         step = np.where(step > 0.0, step, np.inf)
         seen = step if seen is None else np.minimum(seen, step)
