@@ -130,8 +130,8 @@ def test_ur10e_calibrated_on_its_excitation_runs_detects_pushes_and_nothing_in_f
 def test_real_recordings_keep_their_stamps_for_the_fits(panda):
     """The fits' sample clock (:mod:`neforward_ros.estimation.clock`) takes no real recording's stamps for
     write times: the Panda's (fed from 250 starts 16 samples apart, each its first 2,000 samples: at
-    most 2 % taken, 1 as built; 53 % with the Kalman bank's one check over 64 samples, 4 % with two
-    checks over 128) and every UR10e recording's from its start."""
+    most 2 % taken, 1 as built; 53 % with one check over 64 samples, the Kalman bank's rule until
+    2026-11-28, and 4 % with two checks over 128) and every UR10e recording's from its start."""
     from neforward_ros.estimation.clock import written_from
     from neforward_ros.estimation.repeats import repeated
 
