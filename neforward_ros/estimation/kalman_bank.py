@@ -45,7 +45,7 @@ import numpy as np
 
 from neforward_ros.estimation import native_fit, native_kalman
 from neforward_ros.estimation.adaptive import noise_of
-from neforward_ros.estimation.clock import SampleClock, median_of_few
+from neforward_ros.estimation.clock import SILENCE, SampleClock, median_of_few
 from neforward_ros.estimation.kalman import KalmanTrack
 from neforward_ros.estimation.motion import TICK_NS, KalmanSettings, MotionModel, MotionModels, interval
 from neforward_ros.stamps import NS
@@ -130,8 +130,6 @@ class KalmanBank:
         self._positions: deque[tuple[float, float, np.ndarray]] = deque(maxlen=NOISE_WINDOW)
         self._velocities: deque[tuple[float, float, np.ndarray]] = deque(maxlen=NOISE_WINDOW)
         self.clock = SampleClock()  # whether the stamps are write times, and the clock recovered from them
-        self.written = False
-        """Whether the stamps were found to be write times: the filter then runs on the recovered clock."""
         self._models: deque[tuple[int, int]] = deque()  # (stamp, the filter's time) of the steps kept
         self._steps: dict[str, np.ndarray] = {}  # the smallest change seen so far, per joint: an encoder's step
         self.read_noise: dict[str, float] = {}  # the variances read from the samples so far
@@ -140,13 +138,18 @@ class KalmanBank:
         """Per joint, the mean normalised revision of the fixed-lag estimates (see :meth:`estimate`)."""
 
     @property
+    def written(self) -> bool:
+        """Whether the stamps were found to be write times: the filter then runs on the recovered clock."""
+        return self.clock.written
+
+    @property
     def steps(self):  # the filter's steps (one per sample; every model shares the stamps)
         return self.track.steps
 
     def add(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> None:
         """One sample of every joint (see :meth:`KalmanTrack.add`)."""
         usual = median_of_few(self._intervals) if len(self._intervals) >= 4 else None
-        silence = self._last is not None and usual is not None and (stamp - self._last) / NS > 3.0 * usual
+        silence = self._last is not None and usual is not None and (stamp - self._last) / NS > SILENCE * usual
         if silence:
             # A silence: differences across it are motion, not noise. Read the noise afresh after it,
             # with what was read before it meanwhile.
@@ -155,7 +158,6 @@ class KalmanBank:
             self._velocities.clear()
             # (the clock goes on: it counts the periods of a silence as of a dropped sample)
         recovered = self.clock.add(stamp, positions)
-        self.written = self.clock.written
         self._tune_noise(stamp, recovered, positions, velocities)
         model = stamp
         if self.written:  # the recovered time, after the filter's newest (which may be a stamp)
@@ -414,7 +416,6 @@ class KalmanBank:
         bank._positions = deque(((t, r, p[columns]) for t, r, p in self._positions), maxlen=NOISE_WINDOW)
         bank._velocities = deque(((t, r, v[columns]) for t, r, v in self._velocities), maxlen=NOISE_WINDOW)
         bank.clock = self.clock.select(columns)
-        bank.written = self.written
         bank._models = deque(self._models)
         bank._steps = {k: v[columns] for k, v in self._steps.items()}
         bank.revisions = None if self.revisions is None else self.revisions[columns]
