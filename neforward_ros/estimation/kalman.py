@@ -56,9 +56,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from neforward_ros.estimation import native_fit, native_kalman
-from neforward_ros.estimation.motion import MotionModel, MotionModels, interval
+from neforward_ros.estimation.motion import MotionModel, MotionModels, interval, off_the_clock
 
 _LOG_2PI = float(np.log(2.0 * np.pi))
+REACH = 0.01
+"""s: the furthest the newest filtered velocity is carried at constant acceleration to move a sample to
+the filter's clock (:meth:`KalmanTrack._on_the_clock`): a quarter of the fastest model's length scale.
+After a longer silence the velocity is carried that far only (half a microsecond times the error of an
+extrapolation over a dropout could exceed a fine encoder's noise; over REACH it is far below)."""
 UNROLLED = 1024
 """The most steps kept whose smoothed state the newest samples still update (a 20 ms lag at 1 kHz
 needs 21)."""
@@ -90,12 +95,18 @@ class KalmanTrack:
         self._smoothed: _Smoothed | None = None  # x_k|N, C_k and the variances of the module docstring
         self._found: tuple[tuple[int, int, int, int], int] | None = None  # see _index()
         self._stepper: native_kalman.Stepper | None = None  # the C step's arguments, once it serves
+        lams = [model.lam for model in self.models.models]
+        self._fastest = lams.index(max(lams))  # the model with the shortest length scale
+        self._rates = np.ascontiguousarray(self.models.readout[self._fastest, 1:])  # its q', q'' rows (2, dim)
         first = self.models.models[0].settings
         self._noise = first.noise**2
         self._velocity_noise = first.velocity_noise**2
         self.nis = np.ones((len(self.models), 0))
         """Each model's and joint's normalised innovation squared at the last sample, per measured
         dimension (1 on average when the model fits the motion and the noise)."""
+        self.read = np.zeros(0)
+        """The newest sample's positions as the filters read them: at the filter's time for its stamp
+        (:meth:`_on_the_clock`)."""
 
     def add(self, stamp: int, positions: np.ndarray, velocities: np.ndarray) -> np.ndarray:
         """One sample of every joint: positions (m,), velocities (m,), NaN where not measured.
@@ -104,6 +115,10 @@ class KalmanTrack:
         models = self.models
         count = len(models)
         first = not self.steps
+        if not first and (offset := off_the_clock(stamp)):
+            positions, velocities = self._on_the_clock(offset, interval(stamp, self.steps[-1].stamp), positions,
+                                                       velocities)  # fmt: skip
+        self.read = positions
         smoothed = self._smoothed
         if first:
             state = np.zeros((count, models.dim, len(positions)))
@@ -160,6 +175,24 @@ class KalmanTrack:
             self.nis = np.ones((count, len(positions)))
             return np.zeros((count, len(positions)))
         return likelihood
+
+    def _on_the_clock(
+        self, offset: float, dt: float, positions: np.ndarray, velocities: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The sample moved from its stamp to the filter's time for it, ``offset`` s before the stamp
+        (:func:`~.motion.off_the_clock`) and ``dt`` s after the newest step: each position less offset x
+        the joint's velocity there, each velocity less offset x its acceleration, both as the fastest
+        model carries its newest filtered state forward at constant acceleration, over at most
+        :data:`REACH` (its lag on the fastest motion is the least; any model's error there, times half a
+        microsecond, is far below an encoder's noise).
+
+        Read at the rounded time unmoved, a 20-bit encoder's samples of a joint turning at 10 rad/s
+        carry 2.9e-6 rad of error (0.29 us RMS times the speed), nearly twice the encoder's own 1.7e-6:
+        the 20 ms estimate of 5 Hz sines through 20 bits was 1.85x hindsight's error at 500 Hz and 1.71x
+        at 1 kHz; moved, 1.36x and 1.51x, as with a clock of 1 ns (``bench/bench_estimator_family.py``)."""
+        rates = self._rates @ self.steps[-1].filtered[self._fastest]  # (2, m): q', q''
+        velocity = rates[0] + min(dt, REACH) * rates[1]
+        return positions - offset * velocity, velocities - offset * rates[1]
 
     def _add_native(
         self, library: ctypes.CDLL, stamp: int, positions: np.ndarray, velocities: np.ndarray

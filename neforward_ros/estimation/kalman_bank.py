@@ -165,7 +165,7 @@ class KalmanBank:
         self._models.append((stamp, model))
         previous = self.track.steps[-1].stamp if self.track.steps else None
         likelihoods = self.track.add(model, positions, velocities)
-        errors = None if self.smooth else self._prediction_errors(previous, model, positions, silence, usual)
+        errors = None if self.smooth else self._prediction_errors(previous, model, self.track.read, silence, usual)
         if self.scores is None or self._last is None:
             self.scores = likelihoods if self.known_scores is None else likelihoods + self.known_scores
         else:
