@@ -61,7 +61,7 @@ from neforward_ros.estimation.motion import MotionModel, MotionModels, interval,
 _LOG_2PI = float(np.log(2.0 * np.pi))
 REACH = 0.01
 """s: the furthest the newest filtered velocity is carried at constant acceleration to move a sample to
-the filter's clock (:meth:`KalmanTrack._on_the_clock`): a quarter of the fastest model's length scale.
+the filter's clock (:meth:`KalmanTrack._on_the_clock`): a quarter of the bank's shortest length scale.
 After a longer silence the velocity is carried that far only (half a microsecond times the error of an
 extrapolation over a dropout could exceed a fine encoder's noise; over REACH it is far below)."""
 UNROLLED = 1024
