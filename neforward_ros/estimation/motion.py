@@ -47,17 +47,20 @@ TICK_NS = round(QUANTUM * 1e9)
 """ns: :data:`QUANTUM`, the least interval between two of the filter's steps."""
 
 
+def _ticks(stamp: int) -> int:
+    """The filter's time for a stamp (ns): the stamp rounded to :data:`QUANTUM`, in its ticks."""
+    return (stamp + TICK_NS // 2) // TICK_NS
+
+
 def interval(later: int, earlier: int) -> float:
     """s between two stamps (ns), each rounded to :data:`QUANTUM`: the filter's intervals."""
-    half = TICK_NS // 2
-    return ((later + half) // TICK_NS - (earlier + half) // TICK_NS) * QUANTUM
+    return (_ticks(later) - _ticks(earlier)) * QUANTUM
 
 
 def off_the_clock(stamp: int) -> float:
     """s: how far a stamp (ns) lies after the filter's time for it, the stamp rounded to
     :data:`QUANTUM` (at most half of it either way)."""
-    half = TICK_NS // 2
-    return (stamp - (stamp + half) // TICK_NS * TICK_NS) * 1e-9
+    return (stamp - _ticks(stamp) * TICK_NS) * 1e-9
 
 
 @dataclass(frozen=True)
