@@ -59,6 +59,18 @@ worked out at every target anyway), not only where the candidates are kept for s
 between two checks went through unchecked (an arm's moves at 500 Hz: the steady 99th percentile of the
 q'' error 6.4 rad/s^2, against 1.34 checked at every target; ``test_kalman_joined.py``)."""
 
+CHECK_LEAPS = True
+"""The chosen candidate's estimate is checked against the rule at once where, between the targets kept for
+scoring, it leaves the rule's estimate at the last check by more than that check allows (a move starting
+after a dwell, whose record chose a short window: at 1 kHz through 12 bits, one encoder step read as hundreds
+of rad/s^2 at four targets in five; ``test_transients.py``)."""
+NO_RECORD_BY_DEVIATION = True
+"""kalman: from a start, a joint without a record gets the bank's own estimate or the rule's for the same
+delay, whichever states the smaller deviation (the bank's own alone until 2026-11-28: its models are near
+their prior, 79x the steady 99th percentile of the error at 100 Hz through 12 bits; ``test_transients.py``).
+After a restart within a stream the bank's own serves, as before: its models start from the weights
+learnt before the restart."""
+
 _REPEATS = "repeats"
 
 __all__ = ["RESTART", "JointEstimate", "StreamSettings", "StreamingEstimator"]
@@ -137,6 +149,9 @@ class StreamingEstimator:
         # and when last added to (s; NaN: never)
         self._rule_spread = np.zeros((2, len(self.joint_names)))
         self._rule_checked = np.full(len(self.joint_names), np.nan)
+        # the rule's estimate at the last check (NaN: none): an estimate between checks that leaves it by more
+        # than the check allows is checked at once (see _chosen_fit)
+        self._rule_last = np.full(len(self.joint_names), np.nan)
         chosen = self.settings.method == "polyfit" and self.settings.adaptive and self.settings.order is None
         # kalman with the bank: its models join the fits' candidates for the same delay, chosen alike
         self._joined = self.settings.method == "kalman" and self.settings.kalman.length_scale == 0
@@ -375,6 +390,7 @@ class StreamingEstimator:
         self._overruled[columns] = False
         self._rule_spread[:, columns] = 0.0
         self._rule_checked[columns] = np.nan
+        self._rule_last[columns] = np.nan
 
     def _forget(self, group: JointHistory, joints: list[int]) -> None:
         group.remove(joints)
@@ -577,9 +593,10 @@ class StreamingEstimator:
         first and second derivative, the
         estimate's standard deviation and whether it took the smallest window its degree allows (m,).
         ``models``: the Kalman bank's models as further candidates, after the fits (see
-        :meth:`_model_candidates`); ``bank``: the bank's own estimate, which serves a joint without a record
-        in the rule's place and, at a fixed lag (``lead``, s, the windows reach past the target; 0:
-        causal), checks the chosen estimate at every target in its place."""
+        :meth:`_model_candidates`); ``bank``: the bank's own estimate, which at a fixed lag (``lead``, s, the
+        windows reach past the target; 0: causal) checks the chosen estimate at every target in the rule's
+        place, and serves a joint without a record where it states a smaller deviation than the rule's for
+        the same delay."""
         joints = np.asarray(group.joints)
         fits = len(DEGREES) * len(self._half_widths)
         if self._candidates is not None:  # every candidate, to be scored
@@ -623,13 +640,20 @@ class StreamingEstimator:
         # fixed lag, at every estimate (BANK_GUARDS_EVERY_TARGET).
         guarded = BANK_GUARDS_EVERY_TARGET and bank is not None and lead > 0.0
         if self._candidates is None and known.all() and not self._overruled[joints].any() and not guarded:
-            return mine
+            # between checks: unchecked unless the estimate left the last check's rule estimate by more than
+            # that check would allow now (a move starting after a dwell, whose record chose a short window:
+            # at 1 kHz through 12 bits, an encoder step read as hundreds of rad/s^2 four targets in five)
+            remembered = np.sqrt(self._rule_spread[0, joints] / np.maximum(self._rule_spread[1, joints], 1e-300))
+            leaps = CHECK_LEAPS and (np.abs(ours - self._rule_last[joints]) > GAMMA * np.hypot(remembered, error)).any()
+            if not leaps:
+                return mine
         if guarded:
             rule = bank
         else:
             rule = adaptive_fit(times, values, target_s, self.settings.window / 2.0, self.settings.degree, 0.0,
                                 derivative)  # fmt: skip
         theirs = np.where(derivative == 2, rule[2], rule[1])
+        self._rule_last[joints] = theirs
         # the rule's deviation, or where larger its root mean square over the last half window's checks (one
         # estimate's falls short of the rule's errors on a coarse encoder, where they come and go)
         since = target_s - self._rule_checked[joints]
@@ -649,8 +673,17 @@ class StreamingEstimator:
             # the record is of targets where the samples came steadily, and after a gap (a writer's burst)
             # a model the record trusts can be 40 of its recorded deviations off, well within the check
             mine = (*mine[:3], np.fmax(error, np.sqrt(np.maximum(gap * gap - spread * spread, 0.0))), mine[4])
-        if bank is not None and (chosen < 0).any():
-            rule = tuple(np.where(chosen < 0, a, b) for a, b in zip(bank, rule, strict=True))
+        if bank is not None and (chosen < 0).any():  # no record: from a start, the bank's own or the rule's
+            # (for the same delay), whichever states the smaller deviation (the bank's models are still near
+            # their prior: at 100 Hz through 12 bits, 1.5 Hz sines, its own was 264 rad/s^2 off for the
+            # first 0.1 s, stating 70; the rule's about 4 off, stating 4); after a restart, the bank's own
+            served = bank
+            if NO_RECORD_BY_DEVIATION and group.track.known_scores is None:  # (known: a restart's)
+                fallback = rule if lead == 0.0 else adaptive_fit(times, values, target_s, self.settings.window / 2.0,
+                                                                 self.settings.degree, lead, derivative)  # fmt: skip
+                own = ~(fallback[3] < bank[3])
+                served = tuple(np.where(own, a, b) for a, b in zip(bank, fallback, strict=True))
+            rule = tuple(np.where(chosen < 0, a, b) for a, b in zip(served, rule, strict=True))
         return tuple(np.where(known, a, b) for a, b in zip(mine, rule, strict=True))
 
     def _score(self, now: int) -> None:
