@@ -410,6 +410,7 @@ class KalmanBank:
         bank.read_noise = dict(self.read_noise)
         bank.track = self.track.select(columns)
         bank.scores = None if self.scores is None else self.scores[:, columns]
+        bank.known_scores = None if self.known_scores is None else self.known_scores[:, columns]
         bank._last = self._last
         bank._intervals = deque(self._intervals, maxlen=16)
         bank._origin = self._origin
