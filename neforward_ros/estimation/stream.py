@@ -392,6 +392,11 @@ class StreamingEstimator:
         self._rule_checked[columns] = np.nan
         self._rule_last[columns] = np.nan
 
+    def _remembered_spread(self, joints: np.ndarray) -> np.ndarray:
+        """The rule's deviation at these joints' checks, root mean square over about the last half window
+        (rad/s^2 or m/s^2; 0 where never checked)."""
+        return np.sqrt(self._rule_spread[0, joints] / np.maximum(self._rule_spread[1, joints], 1e-300))
+
     def _forget(self, group: JointHistory, joints: list[int]) -> None:
         group.remove(joints)
         self._forget_scores(joints)
@@ -643,7 +648,7 @@ class StreamingEstimator:
             # between checks: unchecked unless the estimate left the last check's rule estimate by more than
             # that check would allow now (a move starting after a dwell, whose record chose a short window:
             # at 1 kHz through 12 bits, an encoder step read as hundreds of rad/s^2 four targets in five)
-            remembered = np.sqrt(self._rule_spread[0, joints] / np.maximum(self._rule_spread[1, joints], 1e-300))
+            remembered = self._remembered_spread(joints)
             leaps = CHECK_LEAPS and (np.abs(ours - self._rule_last[joints]) > GAMMA * np.hypot(remembered, error)).any()
             if not leaps:
                 return mine
@@ -663,7 +668,7 @@ class StreamingEstimator:
         remembered[1] += 1.0
         self._rule_spread[:, joints] = remembered
         self._rule_checked[joints] = target_s
-        spread = np.fmax(rule[3], np.sqrt(self._rule_spread[0, joints] / self._rule_spread[1, joints]))
+        spread = np.fmax(rule[3], self._remembered_spread(joints))
         gap = ours - theirs
         agree = np.abs(gap) <= GAMMA * np.hypot(spread, error)
         self._overruled[joints] = known & ~agree
