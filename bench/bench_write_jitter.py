@@ -10,13 +10,16 @@ stamps and with the written ones, and their ratio; the summary gives the ratios 
 as the sample times, written stamps make the motion between a sample and its stamp (velocity x delay)
 read as noise, of a size that changes with the velocity: every setting finds such stamps from the
 noise they read (``neforward_ros/estimation/clock.py``) and runs on the clock it recovers from them,
-after about 2 s at 100 Hz (the fits), less at higher rates.
+by 0.63 s at 100 Hz (one check over half a second may decide), 0.5-0.67 s at 200-250 Hz, 0.19-1.3 s at
+500 Hz-1 kHz (three checks in a row).
 
-Usage: python bench/bench_write_jitter.py
+Usage: python bench/bench_write_jitter.py [--rates 100,500,1000] [--delays 0.4] [--bits 16] [--seeds 300]
+       [--kinds sines1.5,gait,minjerk] [--only polyfit,kalman]  (settings by their names' start)
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -86,28 +89,42 @@ def errors(
     return out, estimator
 
 
+def numbers(text: str, kind: type = float) -> list:
+    return [kind(x) for x in text.split(",")]
+
+
 def main() -> None:
-    print(f"stamps written 0-{DELAY:.0%} of a period after the sample; q-ddot relative RMS error, "
-          "true stamps -> written stamps (ratio)")  # fmt: skip
-    print(f"{'motion':<10}{'rate':>6}  " + "".join(f"{name:>36}" for name in SETTINGS))
-    ratios: dict[str, list[float]] = {name: [] for name in SETTINGS}
-    later: dict[str, list[float]] = {name: [] for name in SETTINGS}  # from LATER s on
-    for kind in ("sines1.5", "gait", "minjerk"):
-        for rate in (100, 500, 1000):
-            rng = np.random.default_rng(SEED)
-            t = np.arange(int(8 * rate)) / rate
-            q, qdd = motion(kind, t, rng)
-            step = 2 * np.pi / 2**16
-            measured = np.round(q / step) * step
-            written = t + rng.uniform(0.0, DELAY / rate, len(t))
-            row = []
-            for name, settings in SETTINGS.items():
-                (true_error, true_later), _ = errors(t, measured, qdd, t, settings, (1.0, LATER))
-                (written_error, written_later), _ = errors(written, measured, qdd, t, settings, (1.0, LATER))
-                ratios[name].append(written_error / true_error)
-                later[name].append(written_later / true_later)
-                row.append(f"{true_error:9.2%} -> {written_error:8.2%} ({written_error / true_error:6.1f}x)")
-            print(f"{kind:<10}{rate:>6}  " + "".join(f"{cell:>36}" for cell in row), flush=True)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rates", type=numbers, default=[100.0, 500.0, 1000.0])
+    parser.add_argument("--delays", type=numbers, default=[DELAY], help="longest write delays, in periods")
+    parser.add_argument("--bits", type=lambda text: numbers(text, int), default=[16])
+    parser.add_argument("--seeds", type=lambda text: numbers(text, int), default=[SEED])
+    parser.add_argument("--kinds", type=lambda text: text.split(","), default=["sines1.5", "gait", "minjerk"])
+    parser.add_argument("--only", type=lambda text: text.split(","), help="settings by their names' first word(s)")
+    args = parser.parse_args()
+    chosen = {n: s for n, s in SETTINGS.items() if not args.only or any(n.startswith(o) for o in args.only)}
+    print("stamps written 0 to the longest delay (a share of the period) after the sample; q-ddot relative "
+          "RMS error, true stamps -> written stamps (ratio)")  # fmt: skip
+    print(f"{'motion':<10}{'rate':>6}{'delay':>6}{'bits':>5}{'seed':>5}  " + "".join(f"{n:>36}" for n in chosen))
+    ratios: dict[str, list[float]] = {name: [] for name in chosen}
+    later: dict[str, list[float]] = {name: [] for name in chosen}  # from LATER s on
+    cases = [(k, r, d, b, s) for k in args.kinds for r in args.rates for d in args.delays for b in args.bits
+             for s in args.seeds]  # fmt: skip
+    for kind, rate, delay, bits, seed in cases:
+        rng = np.random.default_rng(seed)
+        t = np.arange(int(8 * rate)) / rate
+        q, qdd = motion(kind, t, rng)
+        step = 2 * np.pi / 2**bits
+        measured = np.round(q / step) * step
+        written = t + rng.uniform(0.0, delay / rate, len(t))
+        row = []
+        for name, settings in chosen.items():
+            (true_error, true_later), _ = errors(t, measured, qdd, t, settings, (1.0, LATER))
+            (written_error, written_later), _ = errors(written, measured, qdd, t, settings, (1.0, LATER))
+            ratios[name].append(written_error / true_error)
+            later[name].append(written_later / true_later)
+            row.append(f"{true_error:9.2%} -> {written_error:8.2%} ({written_error / true_error:6.1f}x)")
+        print(f"{kind:<10}{rate:>6g}{delay:>6g}{bits:>5}{seed:>5}  " + "".join(f"{c:>36}" for c in row), flush=True)
     print()
     for name, values in ratios.items():
         print(f"{name}: written stamps' error over the true stamps' median {np.median(values):.1f}x, "

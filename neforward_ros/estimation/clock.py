@@ -14,12 +14,16 @@ three passes, each leaning the line on the lowest samples of the one before), dr
 :data:`REFIT` samples. The recovered clock follows the line without ever jumping (its step per period
 leans towards the line over :data:`SETTLE` periods); the periods since the sample before are counted
 from the recovered time and the stamps' mean delay after it, so that delays up to most of a period
-(0.7 of it, tested with dropped samples) never count one. Whether a stream's stamps are write times is for
-the caller to tell: where the stamps are the sample times (a driver that stamps at sampling, jittered
-or not), the line would move samples off their times. :class:`SampleClock` tells it for a stream by the
-noise its positions read on both clocks (:func:`stamps_are_write_times`): the Kalman bank
-(:mod:`.kalman_bank`) and the fits' sample histories (:mod:`.history`), each with a clock of its own, run
-on the recovered clock once it reads far less.
+(0.7 of it, tested with dropped samples) never count one. Before the first line they are counted from
+the intervals, where delays over half a period make some read as a dropped sample (or hide one): a line
+is drawn only where every stamp lies less than :data:`SPREAD` of a period above it, and where it does
+not the periods are counted again from the stamps' phases (:meth:`WriteClock._recount`). Whether a
+stream's stamps are write times is for the caller to tell: where the stamps are the sample times (a
+driver that stamps at sampling, jittered or not), the line would move samples off their times.
+:class:`SampleClock` tells it for a stream by the noise its positions read on the stamps and on the
+newest line (:func:`stamps_are_write_times`): the Kalman bank (:mod:`.kalman_bank`) and the fits'
+sample histories (:mod:`.history`), each with a clock of its own, run on the recovered clock once it
+reads far less, every sample they hold placed on that line (:meth:`SampleClock.retimed`).
 """
 
 from __future__ import annotations
@@ -37,7 +41,18 @@ from neforward_ros.stamps import NS
 SPAN = 256
 """Periods of stamps the line is drawn over."""
 REFIT = 32
-"""Samples between two drawings of the line."""
+"""Samples between two drawings of the line; a quarter of the stamps kept where fewer (the first lines,
+drawn over few stamps, are the least sure of their period: delays to 0.7 of a period at 100 Hz, the line
+over the first 64 stamps 0.7 % off, which miscounted a period 10 samples on)."""
+SPREAD = 0.75
+"""The most of a period the stamps kept may lie above a line for it to be drawn: a writer's delays spread
+over up to 0.7 of a period are recovered (``test/test_write_clock.py``). Lines whose stamps spread over
+more are a stream stamped at its samples, irregularly: the Panda's recording (fed from 250 starts, see
+:data:`WRITTEN_AFTER`) was taken for write times from 8 starts with lines up to a whole period, 1 with
+this."""
+PERIOD_SEARCH = 0.15
+"""The share of the usual interval either side of it over which the period is searched where the stamps'
+periods are counted again (:meth:`WriteClock._recount`)."""
 SETTLE = 64
 """Periods over which the recovered clock leans towards a new line (it never jumps: a jump of a few
 microseconds would read as a kink in every joint's motion)."""
@@ -56,15 +71,31 @@ Panda's recording (``../shared/realdata``), whose positions read a median 1.9 ti
 recovered clock than on the stamps, reads under :data:`WRITTEN` over a few stretches: fed from 250
 starts 16 samples apart, the clock took its stamps for write times from 133 of them with windows of 64
 samples and one check (the Kalman bank's rule until 2026-11-28), 40 with 128 and one, 10 with 128 and
-two, 1 with 128 and three. Three checks find
-a writer's stamps (``bench/bench_write_jitter.py``) after 190-770 samples: about 2 s at 100 Hz."""
+two, 1 with 128 and three (none since the check reads the newest line, drawn where it holds the stamps:
+:data:`SPREAD`). Three checks found a writer's stamps (``bench/bench_write_jitter.py``) after 190-770
+samples, about 2 s at 100 Hz, before one check over half a second could decide (:data:`DECISIVE`)."""
+DECISIVE = 0.2
+"""A check whose samples span at least :data:`DECISIVE_SPAN` and read on the recovered clock's line less
+than this share of the noise read on the stamps finds write times alone, without :data:`WRITTEN_AFTER`
+in a row. Over half a second or more, a stream stamped at its samples reads about as much noise on the
+line or more: the Panda's recording (its repeats left out) thinned to 100 Hz read at least 0.72 of it
+over 64 samples, thinned to 200 Hz 0.55 over 128; the UR10e recordings (about 94 Hz) 0.88 over 64,
+jittered samples (+-5 %, 100 Hz) 4.4-19 times more; writers (delays to 0.4 of a period) 0.01-0.04.
+Over shorter spans real stamps can read far less (the Panda at 1 kHz down to 0.006 over 64 samples,
+0.05 over 128, fed from 250 starts): there only checks in a row tell."""
+DECISIVE_SPAN = 0.5
+"""s: the least span of samples over which one check may find write times alone (:data:`DECISIVE`)."""
+EARLY_SAMPLES = 64
+"""Samples the first check may read, before :data:`NOISE_SAMPLES` have come, where they span
+:data:`DECISIVE_SPAN` (128 Hz or less): a 100 Hz writer is then found by about 0.6-1 s, not 2 s."""
 CHECK_EVERY = 128
 """Samples between two of a :class:`SampleClock`'s checks once it has seen :data:`SPAN`."""
 EARLY_CHECK_EVERY = 32
-"""Samples between two checks before: the line drawn from the first samples may not tell yet (1.5 Hz
-sines at 100 Hz, ``bench/bench_write_jitter.py``: the check at 64 samples reads 0.64 of the stamps'
-noise, the one at 96 samples 0.06). With a check every 128 samples from the first, the default stayed
-on the stamps there until 1.9 s, and its error was 12x that at the samples' stamps (1.1x now)."""
+"""Samples between two checks before: the first checks may not tell yet (1.5 Hz sines at 100 Hz,
+``bench/bench_write_jitter.py``, on the recovered clock as it ran, before the checks read the newest
+line: 0.64 of the stamps' noise at 64 samples, 0.06 at 96; on the line 0.009 at 64). With a check every
+128 samples from the first, the default stayed on the stamps there until 1.9 s, and its error was 12x
+that at the samples' stamps (1.1x from 1 s on since the checks read the newest line)."""
 SILENCE = 3.0
 """An interval this many times the usual one is a silence: the samples before it are not compared with
 those after it (the differences across it are motion, not noise)."""
@@ -95,6 +126,7 @@ class WriteClock:
         self._time = 0.0  # ns: the newest recovered time, unrounded
         self._step = 0.0  # ns: its advance per period
         self._delay = 0.0  # ns: the stamps' mean delay after the recovered times (over about SETTLE samples)
+        self._recounted: tuple[int, int] | None = None  # (period index, stamps kept) at the last _recount
 
     def update(self, stamp: int, usual: float | None) -> int:
         """The recovered time (ns) of the sample stamped ``stamp`` (ns), given the usual interval
@@ -111,16 +143,17 @@ class WriteClock:
         self._marks.append((stamp, self._index))
         self._unfitted += 1
         fitted = self._line is not None
-        if len(self._marks) >= FIRST and (not fitted or self._unfitted >= REFIT):
-            self._fit(usual)
+        recounted = False
+        if len(self._marks) >= FIRST and (not fitted or self._unfitted >= min(REFIT, len(self._marks) // 4)):
+            recounted = self._fit(usual)
         if self._line is None:
             self.recovered = stamp
             return stamp
         anchor, index, period = self._line
         envelope = anchor + (self._index - index) * period
-        if not fitted:  # the first line: taken as it is, with the delays above it so far
+        if not fitted or recounted:  # the first line, or one on periods counted again: taken as it is
             self._time, self._step = envelope, period
-            self._delay = float(np.mean([s - (anchor + (i - index) * period) for s, i in self._marks]))
+            self._delay = self._delay_above_line()
         else:  # carried on, its slope leaning towards the envelope over SETTLE periods: no jump
             self._time += periods * self._step
             if self._unfitted == 0:
@@ -129,12 +162,72 @@ class WriteClock:
         self._delay += (stamp - self._time - self._delay) / SETTLE
         return self.recovered
 
-    def _fit(self, usual: float | None) -> None:
+    def _delay_above_line(self) -> float:
+        """ns: the mean of the stamps kept above the newest line."""
+        anchor, index, period = self._line
+        return float(np.mean([s - (anchor + (i - index) * period) for s, i in self._marks]))
+
+    def line_times(self, stamps: np.ndarray) -> np.ndarray | None:
+        """The times (ns, float) on the newest line of the samples stamped ``stamps`` (ns; samples this
+        clock was fed, in order), or None before a line is drawn: the line is straight over them all
+        where the recovered clock, still leaning towards it, is not. A sample among the last
+        :data:`SPAN` is placed at the period it was counted in; an older one (or one from before the
+        clock started) at whole periods before the next, at least one."""
+        if self._line is None:
+            return None
+        anchor, index, period = self._line
+        counted = dict(self._marks)
+        stamps = np.asarray(stamps, dtype=np.int64)
+        periods = np.array([counted.get(int(s), -1) for s in stamps], dtype=np.int64)
+        known = np.flatnonzero(periods >= 0)
+        if len(known) == 0:  # none among the last SPAN: placed from the newest line's own count
+            periods[-1] = self._index - round((self._last - int(stamps[-1])) / period)
+            known = np.array([len(stamps) - 1])
+        for k in range(int(known[0]) - 1, -1, -1):  # the older ones are a prefix
+            periods[k] = periods[k + 1] - max(1, round((int(stamps[k + 1]) - int(stamps[k])) / period))
+        return anchor + (periods - index) * period
+
+    def settle(self) -> None:
+        """Put the recovered clock on the newest line at once: a jump, for a caller that places every
+        sample it holds on that line (:meth:`line_times`) at the same time."""
+        if self._line is None:
+            return
+        anchor, index, period = self._line
+        self._time, self._step = anchor + (self._index - index) * period, period
+        self._delay = self._delay_above_line()
+        self.recovered = round(self._time)
+
+    def _fit(self, usual: float | None) -> bool:
+        """Draw the line through the stamps kept (see the module docstring) where it holds them (every one
+        above it by less than :data:`SPREAD` of its period). Where it does not, the periods were miscounted (delays over
+        half a period make intervals that read as a dropped sample, or hide one): they are counted again
+        (:meth:`_recount`) and the line drawn on them if it holds them; else the line drawn before stays.
+        Kept, a line drawn on miscounted periods has its slope off, and the periods counted on it go on
+        being miscounted (delays to 0.7 of a period at 200 Hz: a line 0.82 periods a sample, a drop
+        counted every 6-15 samples). Returns whether the line was drawn on periods counted again (the
+        recovered clock, counted on the periods before, goes onto it at once)."""
         self._unfitted = 0
+        if not usual:
+            return False
+        line = self._drawn(usual)
+        if line is not None and self._holds(line):
+            self._line = line
+            return False
+        if not self._recount(usual):
+            return False
+        line = self._drawn(usual)
+        if line is None or not self._holds(line):
+            return False
+        self._line = line
+        return True
+
+    def _drawn(self, usual: float) -> tuple[int, int, float] | None:
+        """(stamp, index, period ns) of the line through the stamps kept, None where it cannot be drawn or its
+        period is not within a fifth of the usual interval (not a steady clock here)."""
         stamps, indices = np.array(self._marks, dtype=np.int64).T
         span = indices[-1] - indices[0]
         if span <= 0:
-            return
+            return None
         period = (stamps[-1] - stamps[0]) / span  # a first slope; each pass leans the line on the lowest
         middle = len(stamps) // 2
         for _ in range(3):
@@ -142,10 +235,48 @@ class WriteClock:
             a = int(np.argmin(above[:middle]))
             b = middle + int(np.argmin(above[middle:]))
             if indices[b] <= indices[a]:
-                return
+                return None
             period = (stamps[b] - stamps[a]) / (indices[b] - indices[a])
-        if usual and abs(period / (usual * NS) - 1.0) < 0.2:  # else: not a steady clock here
-            self._line = (int(stamps[b]), int(indices[b]), float(period))
+        if abs(period / (usual * NS) - 1.0) >= 0.2:
+            return None
+        return int(stamps[b]), int(indices[b]), float(period)
+
+    def _holds(self, line: tuple[int, int, float]) -> bool:
+        """Whether every stamp kept lies above the line by less than :data:`SPREAD` of its period."""
+        anchor, index, period = line
+        stamps, indices = np.array(self._marks, dtype=np.int64).T
+        above = stamps - (anchor + (indices - index) * period)
+        return bool(np.all((above > -0.05 * period) & (above < SPREAD * period)))
+
+    def _recount(self, usual: float) -> bool:
+        """Count the kept stamps' periods again, without their intervals: the period is the one, within
+        :data:`PERIOD_SEARCH` of the usual interval, on which the stamps' phases lie in the shortest arc
+        (delays under a period put them in an arc of that part of it; a period off by one part in the
+        stamps' count spreads them over all of it), searched on the newest 32 stamps, then on all near
+        the one found, finely enough that its error drifts by a tenth of a period over the stamps at most.
+        Each stamp counts the whole periods since the first, less the arc's middle. The newest keeps its
+        index (the running clock counts on); where two stamps would share a period, the count stays as
+        it was. Tried again once the stamps kept since have doubled, or :data:`SPAN` have come (it costs
+        about 1 ms). Returns whether the periods were counted otherwise than they were."""
+        if self._recounted is not None and self._index - self._recounted[0] < min(SPAN, self._recounted[1]):
+            return False
+        self._recounted = (self._index, len(self._marks))
+        stamps = np.array([s for s, _ in self._marks], dtype=np.int64)
+        since = (stamps - stamps[0]).astype(float)
+        period, width = usual * NS, PERIOD_SEARCH
+        for count in dict.fromkeys((min(32, len(stamps)), len(stamps))):
+            periods = period * (1.0 + np.arange(-width, width, 0.2 / count))
+            arcs, _ = _shortest_arcs(since[-count:][None, :] / periods[:, None])
+            period, width = float(periods[int(np.argmin(arcs))]), 2.0 / count
+        _, middle = _shortest_arcs(since[None, :] / period)
+        counted = np.round(since / period - middle[0]).astype(np.int64)
+        if np.any(np.diff(counted) < 1):
+            return False
+        indices = self._index - (counted[-1] - counted)
+        if np.array_equal(indices, [i for _, i in self._marks]):
+            return False  # counted as they were
+        self._marks = deque(zip(stamps.tolist(), indices.tolist(), strict=True), maxlen=SPAN)
+        return True
 
     def copy(self) -> WriteClock:
         clock = copy.copy(self)
@@ -153,13 +284,26 @@ class WriteClock:
         return clock
 
 
-def stamps_are_write_times(on_stamps: np.ndarray, on_clock: np.ndarray, moving: np.ndarray) -> bool:
+def _shortest_arcs(cycles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per row of ``cycles`` (..., n; in periods), the shortest arc (a share of the period) holding every
+    phase (their fractional parts), and the arc's middle (in periods, within [0, 1.5))."""
+    phases = np.sort(cycles % 1.0, axis=-1)
+    gaps = np.diff(phases, axis=-1, append=phases[..., :1] + 1.0)  # the last: around from the last to the first
+    widest = np.argmax(gaps, axis=-1)
+    start = np.take_along_axis(phases, (widest[..., None] + 1) % phases.shape[-1], axis=-1)[..., 0]
+    arcs = 1.0 - np.take_along_axis(gaps, widest[..., None], axis=-1)[..., 0]
+    return arcs, start + 0.5 * arcs
+
+
+def stamps_are_write_times(
+    on_stamps: np.ndarray, on_clock: np.ndarray, moving: np.ndarray, share: float = WRITTEN
+) -> bool:
     """Whether the position noise read on the recovered clock (per joint, ``on_clock``) is far less than
-    that read on the stamps (``on_stamps``): the median over the ``moving`` joints, under :data:`WRITTEN`
-    of it."""
+    that read on the stamps (``on_stamps``): the median over the ``moving`` joints, under ``share``
+    (:data:`WRITTEN` unless told) of it."""
     if not moving.any():
         return False
-    return bool(np.median(on_clock[moving]) < WRITTEN * np.median(on_stamps[moving]))
+    return bool(np.median(on_clock[moving]) < share * np.median(on_stamps[moving]))
 
 
 class SampleClock:
@@ -167,14 +311,15 @@ class SampleClock:
     times, then the clock recovered from them (:class:`WriteClock`) for every sample, those before too.
 
     The clock is fed every sample the fits keep, in order. Once :data:`NOISE_SAMPLES` have come since the
-    start or the last silence, and then every :data:`EARLY_CHECK_EVERY` samples (every :data:`CHECK_EVERY`
-    once it has seen :data:`SPAN`), the newest ones' position noise is read on both clocks
-    (:func:`~.adaptive.noise_of`, white). A check that can tell (:data:`TELLING`) and finds the recovered
-    clock's less than :data:`WRITTEN` of the stamps' votes for write times: after :data:`WRITTEN_AFTER` such
-    checks in a row, the stamps are write times, for the rest of the stream. Once :data:`KEEP_AFTER` checks
-    that could tell, made after the first :data:`SPAN` samples, found them to be the samples' times, the
-    stream keeps its stamps (:attr:`kept`) and the clock stops: a driver stamps the same way throughout,
-    and the clock costs about 5 us a sample.
+    start or the last silence (:data:`EARLY_SAMPLES` where they span :data:`DECISIVE_SPAN`), and then every
+    :data:`EARLY_CHECK_EVERY` samples (every :data:`CHECK_EVERY` once it has seen :data:`SPAN`), the newest
+    ones' position noise is read on both clocks (:func:`~.adaptive.noise_of`, white). A check that can tell
+    (:data:`TELLING`) and finds the recovered clock's less than :data:`WRITTEN` of the stamps' votes for
+    write times: after :data:`WRITTEN_AFTER` such checks in a row, or one over :data:`DECISIVE_SPAN` that
+    finds it less than :data:`DECISIVE`, the stamps are write times, for the rest of the stream. Once
+    :data:`KEEP_AFTER` checks that could tell, made after the first :data:`SPAN` samples, found them to be
+    the samples' times, the stream keeps its stamps (:attr:`kept`) and the clock stops: a driver stamps the
+    same way throughout, and the clock costs about 5 us a sample.
     """
 
     def __init__(self) -> None:
@@ -185,7 +330,7 @@ class SampleClock:
         """Whether the stamps were found to be the samples' times, for the rest of the stream."""
         self._last: int | None = None  # ns: the newest stamp
         self._intervals: deque[float] = deque(maxlen=16)  # s: the last intervals between samples
-        self._window: deque[tuple[int, int, np.ndarray]] = deque(maxlen=NOISE_SAMPLES)  # (stamp, recovered, q)
+        self._window: deque[tuple[int, np.ndarray]] = deque(maxlen=NOISE_SAMPLES)  # (stamp, q)
         self._unchecked = CHECK_EVERY  # samples since the last check (the first: once the window is full)
         self._seen = 0  # samples fed
         self._kept_by = 0  # the checks that found the stamps to be the samples' times, after SPAN samples
@@ -205,21 +350,40 @@ class SampleClock:
         self._last = stamp
         recovered = self.clock.update(stamp, usual)
         if not self.written:
-            self._window.append((stamp, recovered, np.array(positions, dtype=float)))
+            self._window.append((stamp, np.array(positions, dtype=float)))
             self._unchecked += 1
             every = EARLY_CHECK_EVERY if self._seen < SPAN else CHECK_EVERY
             self._seen += 1
-            if len(self._window) == NOISE_SAMPLES and self._unchecked >= every:
+            if self._unchecked >= every and self._readable():
                 self._unchecked = 0
                 self._check()
+                if self.written:  # from now on the samples lie on the newest line (see retimed)
+                    self.clock.settle()
+                    recovered = self.clock.recovered
         return recovered
 
+    def retimed(self, stamps: np.ndarray) -> np.ndarray:
+        """The times (ns, float) of the samples stamped ``stamps`` (ns; samples fed, in order) on the
+        recovered clock once the stamps are found to be write times: on the line the clock settled on
+        then (:meth:`WriteClock.line_times`), with which the recovered times go on. The holder of a
+        stream's samples re-times them so at the sample that finds write times."""
+        times = self.clock.line_times(stamps)
+        return np.asarray(stamps, dtype=float) if times is None else times
+
+    def _readable(self) -> bool:
+        """Whether the window holds enough samples for a check: :data:`NOISE_SAMPLES`, or
+        :data:`EARLY_SAMPLES` spanning :data:`DECISIVE_SPAN`."""
+        held = len(self._window)
+        if held == NOISE_SAMPLES:
+            return True
+        return held >= EARLY_SAMPLES and self._window[-1][0] - self._window[0][0] >= DECISIVE_SPAN * NS
+
     def _check(self) -> None:
-        stamps, recovered, values = zip(*self._window, strict=True)
+        stamps, values = zip(*self._window, strict=True)
         first = stamps[0]
         values = np.stack(values)
         on_stamps = (np.array(stamps) - first) / NS
-        on_clock = (np.array(recovered) - first) / NS
+        on_clock = (self.retimed(np.array(stamps)) - first) / NS  # on the newest line
         noise, _ = noise_of(on_stamps, values, coloured=False)
         clock_noise, _ = noise_of(on_clock, values, coloured=False)
         # Where the stamps' spread about the recovered clock, moved at the joint's speed, would stand out
@@ -228,9 +392,11 @@ class SampleClock:
         speed = np.abs(values[-1] - values[0]) / (on_stamps[-1] - on_stamps[0])
         if not (speed * spread > TELLING * np.minimum(noise, clock_noise)).any():
             return
-        if stamps_are_write_times(noise, clock_noise, noise > LEAST_NOISE):
+        moving = noise > LEAST_NOISE
+        if stamps_are_write_times(noise, clock_noise, moving):
             self._written_by += 1
-            self.written = self._written_by >= WRITTEN_AFTER
+            decisive = on_stamps[-1] >= DECISIVE_SPAN and stamps_are_write_times(noise, clock_noise, moving, DECISIVE)
+            self.written = decisive or self._written_by >= WRITTEN_AFTER
             return
         self._written_by = 0
         if self._seen >= SPAN:
@@ -242,7 +408,7 @@ class SampleClock:
         clock = copy.copy(self)
         clock.clock = self.clock.copy()
         clock._intervals = deque(self._intervals, maxlen=16)
-        clock._window = deque(((s, r, q[columns]) for s, r, q in self._window), maxlen=NOISE_SAMPLES)
+        clock._window = deque(((s, q[columns]) for s, q in self._window), maxlen=NOISE_SAMPLES)
         return clock
 
 

@@ -216,7 +216,11 @@ class JointHistory:
         if received:
             self.newest_received = stamp_ns
         if self.clock is not None:
+            written = self.clock.written
             self._recovered[end] = (self.clock.add(stamp_ns, self._positions[end]) - self.origin) / NS
+            if self.clock.written and not written:  # found now: every sample held goes on the clock's line
+                held = slice(self.start, self.end)
+                self._recovered[held] = (self.clock.retimed(self._stamps[held]) - self.origin) / NS
         if self.track is not None:
             self.track.add(stamp_ns, self._positions[end], self._velocities[end])
 

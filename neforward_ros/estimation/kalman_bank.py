@@ -29,8 +29,11 @@ changes), white noise over the last :data:`NOISE_WINDOW` samples, read again eve
 Whether the driver stamps its messages when it writes them is told as the fits' sample histories tell
 it (:class:`~.clock.SampleClock`: the position noise read on the stamps and on the clock recovered from
 them, over checks that can tell); where it does, the filters run on the recovered clock from then on
-(estimates and their stamps stay the messages'). A driver's write delays would otherwise read as noise
-that follows the velocity: 26 times the error on 20 ms, 41 times causal (``bench/bench_write_jitter.py``).
+(estimates and their stamps stay the messages'), the noise is read afresh on the samples kept, placed on
+that clock, and the models are scored afresh (kept, the scores of predictions made on the stamps held the
+20 ms setting's error on 1.5 Hz sines at 100 Hz at 9-10x its steady one for half a second after the
+switch). A driver's write delays would otherwise read as noise that follows the velocity: 26 times the
+error on 20 ms, 41 times causal (``bench/bench_write_jitter.py``).
 Until 2026-11-28 the bank told it by itself, from one check over 64 samples: the Panda's recording, its
 samples' own times, then read as write times 371 samples in, and the bank alone served it (its torque
 error up to 2.08 times the zero-phase reference's, 1.05 now).
@@ -157,7 +160,11 @@ class KalmanBank:
             self._positions.clear()
             self._velocities.clear()
             # (the clock goes on: it counts the periods of a silence as of a dropped sample)
+        written = self.written
         recovered = self.clock.add(stamp, positions)
+        if self.written and not written:  # the noise read afresh, and the models scored afresh: their
+            self._retime_noise_samples()  # predictions so far were of samples at the wrong times
+            self.scores = None
         self._tune_noise(stamp, recovered, positions, velocities)
         model = stamp
         if self.written:  # the recovered time, after the filter's newest (which may be a stamp)
@@ -469,6 +476,20 @@ class KalmanBank:
         found = float(max(_median_of(variance[told]), (fallback * NOISE_FLOOR) ** 2))
         self.read_noise[kind] = found
         return found
+
+    def _retime_noise_samples(self) -> None:
+        """The samples kept for the noise, placed on the recovered clock's line (:meth:`~.clock.SampleClock.retimed`)
+        as the stamps are found to be write times; the noise is read afresh on them at the next sample."""
+        for kind, samples in (("positions", self._positions), ("velocities", self._velocities)):
+            if not samples:
+                continue
+            seconds = np.array([t for t, _, _ in samples])
+            stamps = self._origin + np.round(seconds * NS).astype(np.int64)
+            on_clock = (self.clock.retimed(stamps) - self._origin) / NS
+            kept = [(t, float(r), v) for (t, _, v), r in zip(samples, on_clock, strict=True)]
+            samples.clear()
+            samples.extend(kept)
+            self._unread[kind] = NOISE_EVERY - 1
 
     def _tune_noise(self, stamp: int, recovered: int, positions: np.ndarray, velocities: np.ndarray) -> None:
         settings = self.settings
