@@ -48,14 +48,16 @@ SPREAD = 0.75
 """The most of a period the stamps kept may lie above a line for it to be drawn: a writer's delays spread
 over up to 0.7 of a period are recovered (``test/test_write_clock.py``). Lines whose stamps spread over
 more are a stream stamped at its samples, irregularly: the Panda's recording (fed from 250 starts, see
-:data:`WRITTEN_AFTER`) was taken for write times from 8 starts with lines up to a whole period, 1 with
-this."""
+:data:`WRITTEN_AFTER`) was taken for write times from 8 starts with lines up to a whole period, from
+none with this."""
 PERIOD_SEARCH = 0.15
 """The share of the usual interval either side of it over which the period is searched where the stamps'
 periods are counted again (:meth:`WriteClock._recount`)."""
 SETTLE = 64
-"""Periods over which the recovered clock leans towards a new line (it never jumps: a jump of a few
-microseconds would read as a kink in every joint's motion)."""
+"""Periods over which the recovered clock leans towards a new line (a jump of a few microseconds would
+read as a kink in every joint's motion). It jumps only onto a line drawn on periods counted again (the
+periods it counted were wrong) and where the stamps are found to be write times (its holder places every
+sample it holds on the line then: :meth:`SampleClock.retimed`)."""
 FIRST = 32
 """Samples before a line is drawn (until then the stamps are taken as they are)."""
 WRITTEN = 0.5
@@ -127,6 +129,12 @@ class WriteClock:
         self._step = 0.0  # ns: its advance per period
         self._delay = 0.0  # ns: the stamps' mean delay after the recovered times (over about SETTLE samples)
         self._recounted: tuple[int, int] | None = None  # (period index, stamps kept) at the last _recount
+        self.holds = False
+        """Whether the newest drawing found a line that holds the stamps kept (else the line is an older
+        one, and the periods counted on it may be wrong: a check does not decide on it)."""
+        self.jumps = 0
+        """How many times the recovered clock jumped onto a line drawn on periods counted again: a holder
+        that placed its samples on the line places them again (:meth:`SampleClock.retimed`)."""
 
     def update(self, stamp: int, usual: float | None) -> int:
         """The recovered time (ns) of the sample stamped ``stamp`` (ns), given the usual interval
@@ -154,6 +162,7 @@ class WriteClock:
         if not fitted or recounted:  # the first line, or one on periods counted again: taken as it is
             self._time, self._step = envelope, period
             self._delay = self._delay_above_line()
+            self.jumps += recounted
         else:  # carried on, its slope leaning towards the envelope over SETTLE periods: no jump
             self._time += periods * self._step
             if self._unfitted == 0:
@@ -207,18 +216,19 @@ class WriteClock:
         counted every 6-15 samples). Returns whether the line was drawn on periods counted again (the
         recovered clock, counted on the periods before, goes onto it at once)."""
         self._unfitted = 0
+        self.holds = False
         if not usual:
             return False
         line = self._drawn(usual)
         if line is not None and self._holds(line):
-            self._line = line
+            self._line, self.holds = line, True
             return False
         if not self._recount(usual):
             return False
         line = self._drawn(usual)
         if line is None or not self._holds(line):
             return False
-        self._line = line
+        self._line, self.holds = line, True
         return True
 
     def _drawn(self, usual: float) -> tuple[int, int, float] | None:
@@ -314,11 +324,12 @@ class SampleClock:
     start or the last silence (:data:`EARLY_SAMPLES` where they span :data:`DECISIVE_SPAN`), and then every
     :data:`EARLY_CHECK_EVERY` samples (every :data:`CHECK_EVERY` once it has seen :data:`SPAN`), the newest
     ones' position noise is read on both clocks (:func:`~.adaptive.noise_of`, white). A check that can tell
-    (:data:`TELLING`) and finds the recovered clock's less than :data:`WRITTEN` of the stamps' votes for
-    write times: after :data:`WRITTEN_AFTER` such checks in a row, or one over :data:`DECISIVE_SPAN` that
-    finds it less than :data:`DECISIVE`, the stamps are write times, for the rest of the stream. Once
-    :data:`KEEP_AFTER` checks that could tell, made after the first :data:`SPAN` samples, found them to be
-    the samples' times, the stream keeps its stamps (:attr:`kept`) and the clock stops: a driver stamps the
+    (the clock's newest drawing holds the stamps, :attr:`WriteClock.holds`; :data:`TELLING`) and finds the
+    recovered clock's less than :data:`WRITTEN` of the stamps' votes for write times: after
+    :data:`WRITTEN_AFTER` such checks in a row, or one over :data:`DECISIVE_SPAN` that finds it less than
+    :data:`DECISIVE`, the stamps are write times, for the rest of the stream. Once :data:`KEEP_AFTER`
+    checks that could tell, made after the first :data:`SPAN` samples, found them to be the samples'
+    times, the stream keeps its stamps (:attr:`kept`) and the clock stops: a driver stamps the
     same way throughout, and the clock costs about 5 us a sample.
     """
 
@@ -379,6 +390,9 @@ class SampleClock:
         return held >= EARLY_SAMPLES and self._window[-1][0] - self._window[0][0] >= DECISIVE_SPAN * NS
 
     def _check(self) -> None:
+        if not self.clock.holds:  # stamps spread beyond a writer's, or periods miscounted: see _unheld
+            self._unheld()
+            return
         stamps, values = zip(*self._window, strict=True)
         first = stamps[0]
         values = np.stack(values)
@@ -398,6 +412,17 @@ class SampleClock:
             decisive = on_stamps[-1] >= DECISIVE_SPAN and stamps_are_write_times(noise, clock_noise, moving, DECISIVE)
             self.written = decisive or self._written_by >= WRITTEN_AFTER
             return
+        self._written_by = 0
+        if self._seen >= SPAN:
+            self._kept_by += 1
+            self.kept = self._kept_by >= KEEP_AFTER
+
+    def _unheld(self) -> None:
+        """A check where the clock's newest drawing found no line that holds the stamps: no vote for write
+        times; after the first :data:`SPAN` samples, one for the samples' own times (a writer's stamps,
+        its delays within :data:`SPREAD` of a period, are held once their periods are counted again,
+        which is tried each time the stamps kept have doubled). Without, the Panda's recording was never
+        kept on its stamps (its lines seldom hold them) and the clock ran throughout."""
         self._written_by = 0
         if self._seen >= SPAN:
             self._kept_by += 1

@@ -160,11 +160,12 @@ class KalmanBank:
             self._positions.clear()
             self._velocities.clear()
             # (the clock goes on: it counts the periods of a silence as of a dropped sample)
-        written = self.written
+        written, jumps = self.written, self.clock.clock.jumps
         recovered = self.clock.add(stamp, positions)
-        if self.written and not written:  # the noise read afresh, and the models scored afresh: their
-            self._retime_noise_samples()  # predictions so far were of samples at the wrong times
-            self.scores = None
+        if self.written and not written:
+            self._go_on_clock()
+        elif self.written and self.clock.clock.jumps != jumps:  # the clock mended its count of periods
+            self._retime_noise_samples()
         self._tune_noise(stamp, recovered, positions, velocities)
         model = stamp
         if self.written:  # the recovered time, after the filter's newest (which may be a stamp)
@@ -477,9 +478,17 @@ class KalmanBank:
         self.read_noise[kind] = found
         return found
 
+    def _go_on_clock(self) -> None:
+        """As the stamps are found to be write times: the samples kept for the noise placed on the
+        recovered clock's line (:meth:`~.clock.SampleClock.retimed`), the noise read afresh on them at the
+        next sample, and the models scored afresh (their predictions so far were of samples at the wrong
+        times)."""
+        self._retime_noise_samples()
+        self.scores = None
+
     def _retime_noise_samples(self) -> None:
-        """The samples kept for the noise, placed on the recovered clock's line (:meth:`~.clock.SampleClock.retimed`)
-        as the stamps are found to be write times; the noise is read afresh on them at the next sample."""
+        """The samples kept for the noise, placed on the recovered clock's line (:meth:`~.clock.SampleClock.retimed`);
+        the noise is read afresh on them at the next sample."""
         for kind, samples in (("positions", self._positions), ("velocities", self._velocities)):
             if not samples:
                 continue
