@@ -133,8 +133,8 @@ class WriteClock:
         """Whether the newest drawing found a line that holds the stamps kept (else the line is an older
         one, and the periods counted on it may be wrong: a check does not decide on it)."""
         self.jumps = 0
-        """How many times the recovered clock jumped onto a line drawn on periods counted again: a holder
-        that placed its samples on the line places them again (:meth:`SampleClock.retimed`)."""
+        """How many times the recovered clock jumped onto a line drawn on periods counted again (a holder
+        that placed its samples on the line places them again: :attr:`SampleClock.placings`)."""
 
     def update(self, stamp: int, usual: float | None) -> int:
         """The recovered time (ns) of the sample stamped ``stamp`` (ns), given the usual interval
@@ -173,8 +173,13 @@ class WriteClock:
 
     def _delay_above_line(self) -> float:
         """ns: the mean of the stamps kept above the newest line."""
-        anchor, index, period = self._line
-        return float(np.mean([s - (anchor + (i - index) * period) for s, i in self._marks]))
+        return float(np.mean(self._above(self._line)))
+
+    def _above(self, line: tuple[int, int, float]) -> np.ndarray:
+        """ns: how far each stamp kept lies above ``line`` (stamp, index, period ns)."""
+        anchor, index, period = line
+        stamps, indices = np.array(self._marks, dtype=np.int64).T
+        return stamps - (anchor + (indices - index) * period)
 
     def line_times(self, stamps: np.ndarray) -> np.ndarray | None:
         """The times (ns, float) on the newest line of the samples stamped ``stamps`` (ns; samples this
@@ -253,9 +258,7 @@ class WriteClock:
 
     def _holds(self, line: tuple[int, int, float]) -> bool:
         """Whether every stamp kept lies above the line by less than :data:`SPREAD` of its period."""
-        anchor, index, period = line
-        stamps, indices = np.array(self._marks, dtype=np.int64).T
-        above = stamps - (anchor + (indices - index) * period)
+        above, period = self._above(line), line[2]
         return bool(np.all((above > -0.05 * period) & (above < SPREAD * period)))
 
     def _recount(self, usual: float) -> bool:
@@ -346,6 +349,10 @@ class SampleClock:
         self._seen = 0  # samples fed
         self._kept_by = 0  # the checks that found the stamps to be the samples' times, after SPAN samples
         self._written_by = 0  # the consecutive checks that found them to be write times
+        self.placings = 0
+        """How many times the samples held must be placed on the recovered clock's line (:meth:`retimed`):
+        once as the stamps are found to be write times, again each time the clock then jumps onto a line
+        drawn on periods counted again."""
 
     def add(self, stamp: int, positions: np.ndarray) -> int:
         """The recovered time (ns) of the sample stamped ``stamp`` (ns) with these positions (copied); the
@@ -359,7 +366,10 @@ class SampleClock:
                 self._window.clear()
             self._intervals.append(interval)
         self._last = stamp
+        jumps = self.clock.jumps
         recovered = self.clock.update(stamp, usual)
+        if self.written and self.clock.jumps != jumps:
+            self.placings += 1
         if not self.written:
             self._window.append((stamp, np.array(positions, dtype=float)))
             self._unchecked += 1
@@ -371,6 +381,7 @@ class SampleClock:
                 if self.written:  # from now on the samples lie on the newest line (see retimed)
                     self.clock.settle()
                     recovered = self.clock.recovered
+                    self.placings += 1
         return recovered
 
     def retimed(self, stamps: np.ndarray) -> np.ndarray:

@@ -216,9 +216,9 @@ class JointHistory:
         if received:
             self.newest_received = stamp_ns
         if self.clock is not None:
-            written, jumps = self.clock.written, self.clock.clock.jumps
+            placings = self.clock.placings
             self._recovered[end] = (self.clock.add(stamp_ns, self._positions[end]) - self.origin) / NS
-            if self.clock.written and (not written or self.clock.clock.jumps != jumps):
+            if self.clock.placings != placings:
                 self._place_on_clock_line()
         if self.track is not None:
             self.track.add(stamp_ns, self._positions[end], self._velocities[end])

@@ -160,11 +160,11 @@ class KalmanBank:
             self._positions.clear()
             self._velocities.clear()
             # (the clock goes on: it counts the periods of a silence as of a dropped sample)
-        written, jumps = self.written, self.clock.clock.jumps
+        written, placings = self.written, self.clock.placings
         recovered = self.clock.add(stamp, positions)
         if self.written and not written:
             self._go_on_clock()
-        elif self.written and self.clock.clock.jumps != jumps:  # the clock mended its count of periods
+        elif self.clock.placings != placings:  # the clock mended its count of periods
             self._retime_noise_samples()
         self._tune_noise(stamp, recovered, positions, velocities)
         model = stamp
