@@ -52,6 +52,12 @@ Fibonacci's F(25) = 75025, beyond :data:`LARGEST_DIVISOR`)."""
 HIDDEN = 0.1
 """Below this fraction of a fractional step's rounding, the noise read is blind to it
 (:data:`~.adaptive.HIDDEN`)."""
+NOISE_SAMPLES = 64
+"""Samples the white noise is also read from where the largest window holds fewer
+(:data:`~.adaptive.NOISE_SAMPLES`)."""
+NOISE_HOLE = 2.5
+"""The reading reaches back to no interval longer than this many times the window's longest
+(:data:`~.adaptive.NOISE_HOLE`)."""
 
 WORTH_WAITING = 5000
 """Targets from which a batch waits for the build rather than fitting in numpy meanwhile."""
@@ -71,6 +77,8 @@ SOURCE = f"""
 #define LARGEST_DIVISOR {LARGEST_DIVISOR}.0  /* adaptive.LARGEST_DIVISOR */
 #define CONVERGENTS {CONVERGENTS}
 #define HIDDEN {HIDDEN!r}  /* adaptive.HIDDEN */
+#define NOISE_SAMPLES {NOISE_SAMPLES}  /* adaptive.NOISE_SAMPLES */
+#define NOISE_HOLE {NOISE_HOLE!r}  /* adaptive.NOISE_HOLE */
 """
 SOURCE += r"""
 #include <math.h>
@@ -308,8 +316,61 @@ static void sixths(const double *times, const double *values, long n, long lo, l
         }
 }
 
+/* The furthest back the white noise is also read from for a largest window [lo, hi): the NOISE_SAMPLES
+   up to hi (as many as there are), or lo where the window holds as many (adaptive.noise_reach). */
+static long noise_reach(long lo, long hi) {
+    long first = hi > NOISE_SAMPLES ? hi - NOISE_SAMPLES : 0;
+    return first < lo ? first : lo;
+}
+
+/* Where that reading starts: back from lo towards noise_reach, short of any interval between samples
+   longer than NOISE_HOLE times the window's longest (a hole: adaptive.noise_start). */
+static long noise_start(const double *times, long lo, long hi) {
+    long first = noise_reach(lo, hi);
+    if (first >= lo) return lo;
+    double longest = 0.0;
+    for (long i = lo + 1; i < hi; i++) if (times[i] - times[i - 1] > longest) longest = times[i] - times[i - 1];
+    long start = lo;
+    while (start > first && times[start] - times[start - 1] <= NOISE_HOLE * longest) start--;
+    return start;
+}
+
+/* The noise of `width` samples (window, width x n row-major, at times wt) into white (n), from their
+   normalised sixth divided differences of samples 1, 2, 4, 8 ... apart (see sixth_differences and
+   noise_of): stride 1 is the white noise; a coloured stride counts while they grow at most `growth`
+   times per doubling, once the next one agrees. pre: the sixths of the samples from `offset` before
+   the first on (see sixths), or NULL: computed here. scratch: 3 n. */
+static void read_white(const double *wt, const double *window, long width, long n, const double *pre, long pre_count,
+                       long pre_strides, long offset, double sixth_gain, double growth, double *white,
+                       double *scratch) {
+    double *previous = scratch, *candidate = previous + n, *alive = candidate + n, weights[7];
+    for (long s = 1, b = 0; s == 1 || 6 * s + 8 <= width; s *= 2, b++) {
+        long terms = width - 6 * s;
+        for (long j = 0; j < n; j++) candidate[j] = 0.0;
+        const double *stored = pre != NULL && b < pre_strides ? pre + ((size_t)b * pre_count + offset) * n : NULL;
+        if (stored != NULL)  /* the same numbers, added in the same order */
+            for (long i = 0; i < terms; i++) for (long j = 0; j < n; j++) candidate[j] += stored[i * n + j];
+        else for (long i = 0; i < terms; i++) {
+            divided_weights(wt + i, s, weights);
+            for (long j = 0; j < n; j++) candidate[j] += sixth(window + i * n + j, weights, s, n);
+        }
+        for (long j = 0; j < n; j++) {
+            double noise = candidate[j] / ((double)terms * sixth_gain);
+            if (s == 1) { white[j] = noise; alive[j] = 1.0; }
+            else {
+                alive[j] = alive[j] > 0.0 && noise <= growth * previous[j] ? 1.0 : 0.0;
+                if (alive[j] > 0.0 && previous[j] > white[j]) white[j] = previous[j];  /* confirmed by s */
+            }
+            previous[j] = noise;
+        }
+        int any = 0;  /* no column's noise can grow past its stride: the larger ones change nothing */
+        for (long j = 0; j < n; j++) any |= alive[j] > 0.0;
+        if (!any) break;
+    }
+}
+
 /* adaptive_fit below, with pre (pre_strides, pre_count, n) the sixths of samples [pre_lo, pre_lo +
-   pre_count), covering this target's largest window, or NULL: computed here. */
+   pre_count), covering this target's largest window and its noise_reach, or NULL: computed here. */
 static int fit_target(long count, const double *times, const double *values, long n, double target,
                       long nlevels, const double *levels, const double *leads, long order, long lower,
                       long nalso, const long *also, const long *derivative, double gamma, double roughness,
@@ -347,7 +408,7 @@ static int fit_target(long count, const double *times, const double *values, lon
     }
     double *scratch = malloc(sizeof(double) * (d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n
                                                + (size_t)rings * n + 2 * (size_t)n + (size_t)width * n
-                                               + 5 * (size_t)also_at[nalso] * n));
+                                               + 5 * (size_t)also_at[nalso] * n + (size_t)n));
     if (scratch == NULL) return 2;
     double *moments = scratch, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
     double *out_low = fits_low + 5 * (size_t)valid_low * n;
@@ -355,6 +416,7 @@ static int fit_target(long count, const double *times, const double *values, lon
     double *changes = spread + 4 * n;  /* after previous, candidate, alive: (rings, n) */
     double *noise = changes + (size_t)rings * n, *noise_low = noise + n, *changed = noise_low + n;
     double *fits_also = changed + (size_t)width * n;  /* each further degree's level fits, one after another */
+    double *more = fits_also + 5 * (size_t)also_at[nalso] * n;  /* (n,) the white noise over NOISE_SAMPLES */
     /* each level's changes between consecutive samples (changes_within), from the changes up to each
        sample of the largest window, which holds the others (width, n), every column at once */
     for (long j = 0; j < n; j++) changed[j] = 0.0;
@@ -378,7 +440,6 @@ static int fit_target(long count, const double *times, const double *values, lon
     for (long j = 0; j < n; j++) { spread[j] = sqrt(spread[j] * (1.0 / width)); white[j] = 0.0; }
     if (width >= 8) {
         int fraction[n];  /* per column: its step a fraction of its smallest change (grid_step) */
-        const double *wt = times + lo[0];
         for (long i = 0; i + 1 < width; i++)  /* the smallest change: an encoder's step, if on its grid */
             for (long j = 0; j < n; j++) {
                 double a = fabs(window[(i + 1) * n + j] - window[i * n + j]);
@@ -410,39 +471,19 @@ static int fit_target(long count, const double *times, const double *values, lon
             }
             if (isinf(step[j])) fraction[j] = 0;
         }
-        /* noise from the normalised sixth divided differences of samples 1, 2, 4, 8 ... apart (see
-           sixth_differences and noise_of): stride 1 is the white noise; a coloured stride counts
-           while they grow at most `growth` times per doubling, once the next one agrees */
-        double *previous = spread + n, *candidate = previous + n, *alive = candidate + n, weights[7];
-        for (long s = 1, b = 0; s == 1 || 6 * s + 8 <= width; s *= 2, b++) {
-            long terms = width - 6 * s;
-            for (long j = 0; j < n; j++) candidate[j] = 0.0;
-            const double *stored = pre != NULL && b < pre_strides
-                ? pre + ((size_t)b * pre_count + (lo[0] - pre_lo)) * n : NULL;
-            if (stored != NULL)  /* the same numbers, added in the same order */
-                for (long i = 0; i < terms; i++) for (long j = 0; j < n; j++) candidate[j] += stored[i * n + j];
-            else for (long i = 0; i < terms; i++) {
-                divided_weights(wt + i, s, weights);
-                for (long j = 0; j < n; j++) candidate[j] += sixth(window + i * n + j, weights, s, n);
-            }
-            for (long j = 0; j < n; j++) {
-                double noise = candidate[j] / ((double)terms * sixth_gain);
-                if (s == 1) { white[j] = noise; alive[j] = 1.0; }
-                else {
-                    alive[j] = alive[j] > 0.0 && noise <= growth * previous[j] ? 1.0 : 0.0;
-                    if (alive[j] > 0.0 && previous[j] > white[j]) white[j] = previous[j];  /* confirmed by s */
-                }
-                previous[j] = noise;
-            }
-            int any = 0;  /* no column's noise can grow past its stride: the larger ones change nothing */
-            for (long j = 0; j < n; j++) any |= alive[j] > 0.0;
-            if (!any) break;
-        }
+        read_white(times + lo[0], window, width, n, pre, pre_count, pre_strides, lo[0] - pre_lo, sixth_gain, growth,
+                   white, spread + n);
         for (long j = 0; j < n; j++)  /* a fraction of the smallest change: only where the noise read is
                                          blind to its rounding (grid_step) */
             if (fraction[j] && !(white[j] < HIDDEN * step[j] * (1.0 / sqrt(12.0)))) step[j] = INFINITY;
     }
     for (long j = 0; j < n; j++) if (isinf(step[j]) || width < 8) step[j] = 0.0;
+    long noise_lo = noise_start(times, lo[0], hi[0]);
+    if (noise_lo < lo[0] && hi[0] - noise_lo >= 8) {  /* the white noise read from more samples too: the larger */
+        read_white(times + noise_lo, values + noise_lo * n, hi[0] - noise_lo, n, pre, pre_count, pre_strides,
+                   noise_lo - pre_lo, sixth_gain, growth, more, spread + n);
+        for (long j = 0; j < n; j++) if (more[j] > white[j]) white[j] = more[j];
+    }
     /* on a grid, each level's rounding errors are drawn afresh at most where the change between
        consecutive samples changes by half a step or more, TURNS (2) times those (turns_within):
        `changed` now counts the turns up to each sample of the largest window */
@@ -550,8 +591,8 @@ void adaptive_fits(long count, const double *times, const double *values, long n
     for (long first = 0; first < ntargets; first += block) {
         long last = first + block < ntargets ? first + block : ntargets, lo = count, hi = 0, widest = 0;
         for (long m = first; m < last; m++) {
-            long a = lower_bound(times, count, (targets[m] + leads[0]) - 2.0 * levels[0]);
             long z = upper_bound(times, count, targets[m] + leads[0]);
+            long a = noise_reach(lower_bound(times, count, (targets[m] + leads[0]) - 2.0 * levels[0]), z);
             if (a < lo) lo = a;
             if (z > hi) hi = z;
             if (z - a > widest) widest = z - a;

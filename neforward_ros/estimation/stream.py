@@ -24,7 +24,15 @@ import numpy as np
 
 from neforward_ros.errors import InputError
 from neforward_ros.estimation import degree_choice, native_fit
-from neforward_ros.estimation.adaptive import FLOOR, GAMMA, DeviationPool, adaptive_fit, degree_fit
+from neforward_ros.estimation.adaptive import (
+    FLOOR,
+    GAMMA,
+    NOISE_SAMPLES,
+    DeviationPool,
+    adaptive_fit,
+    degree_fit,
+    noise_reach,
+)
 from neforward_ros.estimation.causal_choice import DEGREES, ErrorScores, candidates, half_widths, usable
 from neforward_ros.estimation.clock import SampleClock
 from neforward_ros.estimation.coverage import uncovered
@@ -301,7 +309,7 @@ class StreamingEstimator:
         self._targets += 1
         if self._targets % 32 == 0:  # forget old samples now and then
             for group in self._groups:
-                group.drop_before(stamp - self._keep_ns, self.settings.degree + 2)
+                group.drop_before(stamp - self._keep_ns, NOISE_SAMPLES + self.settings.degree + 2)
         return out
 
     def _add(self, stamp: int, samples: list[tuple[int, float, float, float]]) -> bool | str:
@@ -497,7 +505,7 @@ class StreamingEstimator:
         acceleration, and the acceleration's standard deviation (NaN where not known)."""
         settings = self.settings
         lead_ns = self._lag_ns
-        times, positions, velocities, by_velocity = self._samples(
+        times, positions, velocities, by_velocity, before = self._samples(
             group, target + lead_ns - self._window_ns, target + lead_ns
         )
         fitted_velocities = bool(by_velocity.any())
@@ -514,7 +522,8 @@ class StreamingEstimator:
             fitted, d1, d2 = local_difference(times, values, target_s, lead_ns / NS)
             return _per_joint((fitted, d1, d2, np.full(values.shape[1], np.nan)), m, by_velocity, exact)
         if not settings.adaptive and group.track is None:  # (polyfit's option: the joined bank's fits adapt)
-            fitted, d1, d2 = fit_window(times, values, target_s, settings.window / 2.0, settings.degree)
+            half = settings.window / 2.0  # on exactly the window's samples
+            fitted, d1, d2 = fit_window(times[before:], values[before:], target_s, half, settings.degree)
             return _per_joint((fitted, d1, d2, np.full(values.shape[1], np.nan)), m, by_velocity, exact)
         derivative = np.full(values.shape[1], 2)
         if fitted_velocities and exact:
@@ -708,7 +717,7 @@ class StreamingEstimator:
             return np.full(len(group.joints), np.nan)
         half = self.settings.window / 2.0
         half_ns = round(half * NS)
-        times, positions, velocities, by_velocity = self._samples(group, stamp - half_ns, stamp + half_ns)
+        times, positions, velocities, by_velocity, _ = self._samples(group, stamp - half_ns, stamp + half_ns)
         values = np.where(by_velocity, velocities, positions)
         derivative = np.where(by_velocity, 1, 2)
         order, lower = degrees(None, True, False)
@@ -717,17 +726,23 @@ class StreamingEstimator:
 
     @staticmethod
     def _samples(group: JointHistory, first_ns: int, last_ns: int) -> tuple[np.ndarray, ...]:
-        """The group's samples stamped in [first_ns, last_ns]: times (s from the segment's origin),
-        positions and velocities, and which joints are fitted on their velocities (those with a
-        velocity in every sample there, when every sample since has them)."""
+        """The group's samples stamped in [first_ns, last_ns], and before them those the adaptive fits
+        also read the white noise from where there are fewer than :data:`~.adaptive.NOISE_SAMPLES`
+        (:func:`~.adaptive.noise_reach`; none where a joint fitted on its velocities lacks one there):
+        times (s from the segment's origin), positions and velocities, which joints are fitted on
+        their velocities (those with a velocity in every sample of [first_ns, last_ns], when every
+        sample since has them), and how many samples come before first_ns (only the adaptive fits,
+        which choose their windows by time, take them)."""
         stamps = group.stamps
         lo = int(stamps.searchsorted(first_ns, side="left"))
         hi = int(stamps.searchsorted(last_ns, side="right"))
-        positions, velocities = group.positions[lo:hi], group.velocities[lo:hi]
         by_velocity = np.zeros(len(group.joints), dtype=bool)
         if group.velocities_everywhere_after(lo):
-            by_velocity = np.isfinite(velocities).all(axis=0)
-        return group.seconds[lo:hi], positions, velocities, by_velocity
+            by_velocity = np.isfinite(group.velocities[lo:hi]).all(axis=0)
+        first = noise_reach(lo, hi)
+        if first < lo and by_velocity.any() and not np.isfinite(group.velocities[first:lo, by_velocity]).all():
+            first = lo
+        return group.seconds[first:hi], group.positions[first:hi], group.velocities[first:hi], by_velocity, lo - first
 
     # -- consistency --------------------------------------------------------------------------
 
