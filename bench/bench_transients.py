@@ -159,7 +159,8 @@ def main() -> None:
                     losses.append(lost)
                     steady = [w / p99 for w in unbroken[1:]]  # the start has no steady counterpart
                     # over the target after the gap or the reset, and as far over with no event there
-                    tails += any(r > TARGET and c > TARGET for r, c in zip(ratio[1:], steady, strict=True))
+                    if args.control:
+                        tails += any(r > TARGET and c > TARGET for r, c in zip(ratio[1:], steady, strict=True))
                     case = f"{rate:g} Hz {bits} b {kind} {seed}"
                     print(f"{name:<30}{case:<22}{p99:>9.3g}" + "".join(f"{r:>7.2f}x" for r in ratio) + f"{lost:>6}"
                           + "".join(f"{c:>12.2f}x " for c in steady), flush=True)  # fmt: skip

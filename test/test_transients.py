@@ -6,6 +6,7 @@ target is issue 26's: the worst error in the second after each event at most 3x 
 
 from __future__ import annotations
 
+import subprocess
 import sys
 from pathlib import Path
 
@@ -56,3 +57,17 @@ def test_the_bank_s_own_estimate_alone_without_a_record_fails_the_start(monkeypa
     monkeypatch.setattr(stream_module, "NO_RECORD_BY_DEVIATION", False)
     with pytest.raises(AssertionError):
         test_a_kalman_start_serves_the_estimate_stating_the_smaller_deviation()
+
+
+@pytest.mark.parametrize("control", [False, True])
+def test_the_bench_prints_its_verdict_with_and_without_the_control(control: bool) -> None:
+    """bench/bench_transients.py as a user runs it, one small case (a ``--control`` summary once broke
+    the run without it)."""
+    script = Path(__file__).resolve().parent.parent / "bench" / "bench_transients.py"
+    arguments = ["--rates", "100", "--bits", "16", "--kinds", "sines1.5", "--seeds", "3", "--only", "polyfit fixed"]
+    done = subprocess.run([sys.executable, str(script), *arguments, *(["--control"] if control else [])],
+                          capture_output=True, text=True, timeout=300, check=False)  # fmt: skip
+    assert done.returncode == 0, done.stderr[-2000:]
+    verdict = done.stdout.strip().splitlines()[-1]
+    assert verdict.startswith("polyfit fixed_lag (default): worst ratio")
+    assert ("with no event too" in verdict) == control
