@@ -50,6 +50,16 @@ RESET_AT, RESET_BY = 8.0, 60.0
 TARGET = 3.0
 
 
+def add_only(parser: argparse.ArgumentParser) -> None:
+    """The benches' ``--only``: settings of :data:`SETTINGS` by their names' first word(s)."""
+    parser.add_argument("--only", type=lambda text: text.split(","), help="settings by their names' first word(s)")
+
+
+def chosen_settings(only: list[str] | None) -> dict[str, StreamSettings]:
+    """The settings of :data:`SETTINGS` whose names start with one of ``only``; every one where None."""
+    return {n: s for n, s in SETTINGS.items() if not only or any(n.startswith(o) for o in only)}
+
+
 def run(
     settings: StreamSettings, kind: str, seed: int, rate: float = RATE, bits: int = BITS
 ) -> tuple[float, list[float], int]:
@@ -69,7 +79,8 @@ def measure(
     that leaves out one in a hundred."""
     t, q, _, qdd = make(kind, rate, bits, seed, SECONDS, joints=JOINTS)
     keep = ~((t >= GAP[0]) & (t < GAP[1]))
-    stamps = (t * 1e9).astype(np.int64) + EPOCH_NS
+    steady_stamps = (t * 1e9).astype(np.int64) + EPOCH_NS
+    stamps = steady_stamps.copy()
     stamps[t >= RESET_AT] -= int(RESET_BY * 1e9)
     errors = _errors(settings, stamps, q, qdd, keep)
     # Stamps whose support (``before`` before them, the lag after) the samples do not cover: before
@@ -98,7 +109,6 @@ def measure(
     lost = int(np.count_nonzero(~warm & np.isnan(errors)))
     if not control:
         return p99, worst, lost, []
-    steady_stamps = (t * 1e9).astype(np.int64) + EPOCH_NS
     unbroken = _errors(settings, steady_stamps, q, qdd, np.ones(len(t), dtype=bool))
     return p99, worst, lost, [_worst_in_second(t, unbroken, first) for first in firsts]
 
@@ -131,7 +141,7 @@ def main() -> None:
     parser.add_argument("--bits", default=str(BITS), help="comma-separated encoder resolutions (default: 16)")
     parser.add_argument("--kinds", default="minjerk,sines1.5", help="comma-separated motions of motion_family.py")
     parser.add_argument("--seeds", default="1,2", help="comma-separated seeds")
-    parser.add_argument("--only", type=lambda text: text.split(","), help="settings by their names' first word(s)")
+    add_only(parser)
     parser.add_argument(
         "--control",
         action="store_true",
@@ -146,8 +156,7 @@ def main() -> None:
     steady_columns = f"{'gap, no event':>15}{'reset, none':>13}" if args.control else ""
     print(f"{'setting':<30}{'case':<22}{'p99':>9}{'start':>8}{'gap':>8}{'reset':>8}{'lost':>6}{steady_columns}")
     verdicts = {}
-    chosen = {n: s for n, s in SETTINGS.items() if not args.only or any(n.startswith(o) for o in args.only)}
-    for name, settings in chosen.items():
+    for name, settings in chosen_settings(args.only).items():
         ratios, losses, over, tails = [], [], 0, 0
         for rate, bits in grid:
             for kind in kinds:

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_transients import SETTINGS  # every documented setting
+from bench_transients import add_only, chosen_settings  # every documented setting, or those chosen
 from motion_family import EPOCH_NS, gait, min_jerk, sines
 
 from neforward_ros.estimation.settings import StreamSettings
@@ -100,9 +100,9 @@ def main() -> None:
     parser.add_argument("--bits", type=lambda text: numbers(text, int), default=[16])
     parser.add_argument("--seeds", type=lambda text: numbers(text, int), default=[SEED])
     parser.add_argument("--kinds", type=lambda text: text.split(","), default=["sines1.5", "gait", "minjerk"])
-    parser.add_argument("--only", type=lambda text: text.split(","), help="settings by their names' first word(s)")
+    add_only(parser)
     args = parser.parse_args()
-    chosen = {n: s for n, s in SETTINGS.items() if not args.only or any(n.startswith(o) for o in args.only)}
+    chosen = chosen_settings(args.only)
     print("stamps written 0 to the longest delay (a share of the period) after the sample; q-ddot relative "
           "RMS error, true stamps -> written stamps (ratio)")  # fmt: skip
     print(f"{'motion':<10}{'rate':>6}{'delay':>6}{'bits':>5}{'seed':>5}  " + "".join(f"{n:>36}" for n in chosen))

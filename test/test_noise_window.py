@@ -27,13 +27,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
 import bench_transients
 from motion_family import make
 
+from conftest import EPOCH_NS
+
 RATE = 100.0
-
-
-def library():
-    found = native_fit.FIT.get(wait=True)
-    assert found is not None, "the C adaptive fit did not build"
-    return found
 
 
 def worst_second_over_p99(seed: int, bits: int, kind: str = "sines1.5") -> float:
@@ -81,7 +77,8 @@ def test_numpy_s_fits_read_the_same_noise_as_the_compiled_ones(monkeypatch) -> N
 def test_c_and_numpy_read_the_noise_from_the_same_samples(rate: float) -> None:
     """One target at a time, with a random number of samples before its window: the same windows
     chosen and the same deviations (the windows' own readings and the longer ones)."""
-    lib = library()
+    lib = native_fit.FIT.get(wait=True)
+    assert lib is not None, "the C adaptive fit did not build"
     rng = np.random.default_rng(int(rate))
     for _ in range(200):
         before = int(rng.integers(0, 80))
@@ -110,7 +107,7 @@ def node_and_bag_apart() -> float:
     recording) at 100 Hz with max_gap 0.05 s: the node's history spans window, lag and max_gap (0.35 s, 35
     samples), fewer than NOISE_SAMPLES. Relative to the largest q''; after 1.5 s (every record full)."""
     t, q, _, _ = make("gait", RATE, 16, 15, 6.0, joints=3)
-    stamps = np.round(t * 1e9).astype(np.int64) + 1_700_000_000_000_000_000
+    stamps = np.round(t * 1e9).astype(np.int64) + EPOCH_NS
     names = ["a", "b", "c"]
     estimator = StreamingEstimator(names, settings=StreamSettings(max_gap=0.05))
     out = [e for k in range(len(t)) for e in estimator.update(int(stamps[k]), names, q[k].tolist())]
