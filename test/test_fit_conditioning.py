@@ -264,7 +264,8 @@ def test_quantised_positions_at_bursty_stamps_are_as_good_as_at_regular_ones(set
 @pytest.mark.parametrize("setting", list(SETTINGS))
 def test_slow_bunched_stamps_state_what_they_cannot_show(setting: str) -> None:
     """A 100 Hz writer stalled 30 ms at a time (three or four messages 40 us apart), 16 bits, and a 200 Hz
-    one, 18 bits: every estimate after the first half second within six times its stated deviation plus
+    one, 18 bits: every estimate after 0.8 s (the causal choice's first waits for its record: 0.65-0.71 s
+    here) within six times its stated deviation plus
     1 % of the joint's largest |q''| of the truth (3.7 at most, every setting, four seeds at 100 Hz:
     ``bench/bench_bunched_stamps.py --slow``).
     The causal settings' one-sided fits were 25 such units off at 100 Hz (q'' 220 rad/s^2 for 0.86)
@@ -275,7 +276,7 @@ def test_slow_bunched_stamps_state_what_they_cannot_show(setting: str) -> None:
         times = bunched_times(seed, rate=rate, seconds=3.0, period=0.03)
         q, qdd = sines(times, 1.0, np.random.default_rng(seed), 3)
         at, accelerations, stds = stream(times, np.round(q / step) * step, SETTINGS[setting])
-        late = times[at] > 0.5
+        late = times[at] > 0.8
         error = accelerations[late] - qdd[at[late]]
         stated = stds[late]
         assert late.sum() > 200 and np.isfinite(error).all()

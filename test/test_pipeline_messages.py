@@ -137,7 +137,7 @@ def test_imu_at_rest_reads_gravity_upward_and_zero_gravity_reads_nothing() -> No
         )
         n = len(pipeline.model.joint_names)
         out = []
-        for k in range(120):  # a robot standing still, positions only, for more than the 0.2 s window
+        for k in range(250):  # a robot standing still, positions only, for more than the 0.2 s window and the record
             out += pipeline.on_joint_state(STAMP + k * 2_000_000, list(pipeline.model.joint_names), [0.3] * n)
         imu = dict(pipeline.messages(out[-1]))["~/panda_link0/imu"]
         assert imu["linear_acceleration"] == pytest.approx({"x": 0.0, "y": 0.0, "z": expected}, abs=1e-9)
@@ -252,7 +252,7 @@ def test_published_bytes_are_the_encoded_contents(robot: str, partial: bool) -> 
         names = names[:-1]
     rng = np.random.default_rng(3)
     results = []
-    for k in range(120):
+    for k in range(250):  # (causal: from 0.36 s on, the window and the record)
         results += pipeline.on_joint_state(STAMP + k * 2_000_000, names, rng.uniform(-1, 1, len(names)).tolist())
     types = {output.topic: output.type for output in pipeline.outputs()}
     assert len(results) > 10

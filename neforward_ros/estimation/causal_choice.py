@@ -25,10 +25,11 @@ error is floored at the candidate's variance for the least noise, so that at res
 rank by their noise. The candidate whose two means sum to the least gives the estimate; its root
 mean square error over the short memory is the stated standard deviation.
 
-The streaming estimator keeps the adaptive rule's estimate where a joint has no record yet
-(:data:`LEAST_RECORD` scores: about 0.15-0.2 s after a start or a restart), and where the chosen
-candidate's estimate leaves the rule's by more than G of their combined deviations: the motion
-changed since the record was made (a move starts after a dwell, whose record chose a long window).
+From a start, the streaming estimator gives a joint no estimate until its record holds (:data:`LEAST_RECORD`
+scores: about 0.15-0.2 s after the first estimate's samples); a restart keeps the record. It keeps the
+adaptive rule's estimate where the chosen candidate's leaves the rule's by more than G of their combined
+deviations: the motion changed since the record was made (a move starts after a dwell, whose record chose a
+long window).
 
 Over the benchmark's family (``python bench/bench_estimator_family.py``), the causal setting's ratio to
 hindsight went from a median 2.34 (worst 8.81, 85 % of the cases over 1.5) to 0.99 (worst 1.95, 4 %
@@ -237,11 +238,13 @@ class ErrorScores:
         self._kept: int | None = None  # the stamp of the last estimates kept
         self._ranking: tuple[np.ndarray, np.ndarray] | None = None  # see _rank; None: to be worked out
 
-    def clear(self, joints: list[int] | None = None) -> None:
-        """Forget the scores and waiting estimates of these joints (all: None), whose history restarted."""
+    def clear(self, joints: list[int] | None = None, keep_record: bool = False) -> None:
+        """Forget the scores and waiting estimates of these joints (all: None), whose history restarted; with
+        ``keep_record``, only the waiting estimates (the scores made go on, from the next one scored)."""
         columns = slice(None) if joints is None else joints
-        self._total[:, :, columns] = 0.0
-        self._weight[:, :, columns] = 0.0
+        if not keep_record:
+            self._total[:, :, columns] = 0.0
+            self._weight[:, :, columns] = 0.0
         self._last[columns] = -1
         self._ranking = None
         if joints is None:
@@ -280,7 +283,7 @@ class ErrorScores:
         if not len(joints):
             return
         last = self._last[joints]
-        decay = np.where(last >= 0, np.exp(-(stamp_ns - last) / self._memory_ns), 0.0)[:, None, :]  # (2, 1, m)
+        decay = np.where(last >= 0, np.exp(-(stamp_ns - last) / self._memory_ns), 1.0)[:, None, :]  # (2, 1, m)
         error = estimates[:, joints] - reference[joints]
         scored = np.isfinite(error)
         squared = np.where(scored, error * error + floors[:, joints], 0.0)
