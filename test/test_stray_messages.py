@@ -98,9 +98,8 @@ def test_strays_mixed_into_a_good_stream_change_no_good_estimate(settings: Strea
 def test_a_real_time_reset_restarts_within_a_few_samples(monkeypatch) -> None:
     """A looped recording: the stream goes on from an earlier time; with the causal choice's records
     forgotten at a restart and no start waiting for them (as until 2026-11-29), the estimates of the second
-    pass are those of a fresh estimator fed the second pass alone. As it is, the records outlive the restart:
-    the second pass has an estimate at every stamp the fresh one has, and from where its samples cover the
-    window (a fresh start waits for its record too)."""
+    pass are those of a fresh estimator fed the second pass alone. As it is, the records outlive the restart
+    and the second pass has estimates at the same stamps as then: no wait for a record after a restart."""
     from neforward_ros.estimation import stream as stream_module
 
     first, second = good_stream(300), good_stream(300, seed=2)
