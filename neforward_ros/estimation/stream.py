@@ -537,8 +537,8 @@ class StreamingEstimator:
         else:
             values = positions
         m = len(group.joints)
-        if settings.method == "difference":
-            fitted, d1, d2 = local_difference(times, values, target_s, lead_ns / NS)
+        if settings.method == "difference":  # on the window's samples alone, as the fixed window below
+            fitted, d1, d2 = local_difference(times[before:], values[before:], target_s, lead_ns / NS)
             return _per_joint((fitted, d1, d2, np.full(values.shape[1], np.nan)), m, by_velocity, exact)
         if not settings.adaptive and group.track is None:  # (polyfit's option: the joined bank's fits adapt)
             half = settings.window / 2.0  # on exactly the window's samples
