@@ -121,6 +121,24 @@ def test_the_rule_s_spread_forgotten_at_the_reset_fails(monkeypatch) -> None:
         test_after_a_time_reset_the_rule_s_spread_goes_on()
 
 
+def test_a_choice_the_bank_overruled_comes_back_only_within_the_bank_s_usual_deviation() -> None:
+    """kalman, 20 ms, minimum-jerk moves at 1 kHz through 12 bits, a move starting soon after the start: the
+    record made over the start's dwell holds the longest window; the bank's own estimate overrules it, and at
+    one target where the bank states a larger deviation than over the last half window the stale choice
+    would be back. Asserted within 2x (the target is 3x) to keep the planted bug's 3.11x clear of it; measured
+    1.53x (2026-11-29)."""
+    ratio = worst_over_steady(KALMAN, "minjerk", 15, 1000.0, 12)
+    assert ratio <= 2.0, ratio
+
+
+def test_a_return_within_one_target_s_deviation_fails(monkeypatch) -> None:
+    """The planted bug: the return checked within the larger of the bank's deviation at this target and over
+    the last half window, as for a choice not overruled (until 2026-11-29): 3.11x."""
+    monkeypatch.setattr(stream_module, "BANK_HOLDS_ITS_OVERRULING", False)
+    with pytest.raises(AssertionError):
+        test_a_choice_the_bank_overruled_comes_back_only_within_the_bank_s_usual_deviation()
+
+
 @pytest.mark.parametrize("control", [False, True])
 def test_the_bench_prints_its_verdict_with_and_without_the_control(control: bool) -> None:
     """bench/bench_transients.py as a user runs it, one small case (a ``--control`` summary once broke

@@ -93,6 +93,14 @@ forgotten, or unfair) gets the bank's own estimate or the rule's for the same de
 smaller deviation (the bank's own alone until 2026-11-28, when it served from a start: its models were near
 their prior, 79x the steady 99th percentile of the error at 100 Hz through 12 bits; ``test_transients.py``).
 After a restart the bank's own serves: its models start from the weights learnt before the restart."""
+BANK_HOLDS_ITS_OVERRULING = True
+"""kalman, fixed lag: where the bank's own estimate overruled a joint's chosen candidate at the last target,
+the candidate returns only where it agrees with the bank's within the deviation the bank stated over the last
+half window (root mean square), not within a larger one the bank states at this target alone. Until
+2026-11-29 one such target let a stale choice back: after a start, minimum-jerk moves at 1 kHz through 12
+bits, the longest window (the start's dwell had chosen it) served 6-15.7 rad/s^2 off for 36 ms, where the
+bank's own was 1-3 off (4.18x the steady 99th percentile; 1.91x since; ``bench/bench_transients.py``)."""
+
 
 _REPEATS = "repeats"
 
@@ -696,7 +704,11 @@ class StreamingEstimator:
         remembered[1] += 1.0
         self._rule_spread[:, joints] = remembered
         self._rule_checked[joints] = target_s
-        spread = np.fmax(rule[3], self._remembered_spread(joints))
+        spread = self._remembered_spread(joints)
+        # (the deviation the rule states at this target, where larger, but not for a return to a candidate
+        # the bank overruled: BANK_HOLDS_ITS_OVERRULING)
+        lenient = ~self._overruled[joints] if guarded and BANK_HOLDS_ITS_OVERRULING else True
+        spread = np.where(lenient, np.fmax(rule[3], spread), spread)
         gap = ours - theirs
         agree = np.abs(gap) <= GAMMA * np.hypot(spread, error)
         self._overruled[joints] = known & ~agree
