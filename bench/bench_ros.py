@@ -50,7 +50,7 @@ def main() -> None:
     args = parser.parse_args()
     if not os.environ.get("NEFORWARD_ROS_PYTHON") and (ROOT / ".venv-ros" / "bin" / "python").exists():
         os.environ["NEFORWARD_ROS_PYTHON"] = str(ROOT / ".venv-ros" / "bin" / "python")
-    from bench_dds import print_row, summary, warm_up_ns
+    from bench_dds import print_row, summary
     from ros.ros_harness import Graph, Workspace, why_not_runnable
 
     from neforward_ros import load_model
@@ -87,7 +87,7 @@ def main() -> None:
     print(f"rmw_cyclonedds on loopback; {args.seconds:g} s per rate; latency from the completing input")
     print(
         f"{'robot':<10} {'mode':<10} {'rate':>6} {'floor p50':>10} {'p99':>6} {'node p50':>9} {'p99':>6}"
-        f" {'above floor':>12} {'lost':>10}"
+        f" {'above floor':>12} {'lost':>12} {'warm-up ms':>10}"
     )
     for label, path in ROBOTS.items():
         if not any(wanted in label for wanted in args.robots.split(",")):
@@ -126,8 +126,7 @@ def main() -> None:
                     stamps = np.array(measured["stamps"], dtype=np.int64)
                     received = [(int(a), int(b)) for a, b in measured["received"]]
                     lag = lag_ns if what == "node" else 0
-                    warm_up = warm_up_ns(mode, args.method) if what == "node" else 0
-                    results[what] = summary(stamps, received, lag, warm_up)
+                    results[what] = summary(stamps, received, lag, what == "node")
                 labels = [f"{label.split()[0]:<10}", f"{mode:<10}", f"{rate:>6.0f}"]
                 print_row(labels, results["floor"], results["node"])
 
