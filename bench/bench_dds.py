@@ -9,12 +9,13 @@ the node's default settings otherwise, and receives ``/neforward/link_states``.
 Latency is receive time minus the stamp of the input that completed the output: the output's own
 input in causal mode; in fixed-lag mode the first input ``lag`` (0.1 s) or more after it, since the
 estimate waits for it. So "latency" is the node's processing and transport, and the configured lag
-comes on top of it. "lost" counts inputs without an output (the first two in causal mode and the
-last ``lag`` of the stream in fixed-lag mode never have one and are not counted).
+comes on top of it. "lost" counts inputs without an output from the node's first output on (the inputs
+before it are its warm-up, printed in ms: the support, and for polyfit causal and kalman their wait for
+the candidates' record; the last ``lag`` of the stream in fixed-lag mode never has one and is not counted).
 
 The floor is measured in the same run: a separate process that echoes each JointState straight
 back on another topic, with no computation. Both use the same publisher and reader code here.
-Prints p50/p99 latency, lost outputs, and the node's p50 above the floor's.
+Prints p50/p99 latency, the node's p50 above the floor's, lost outputs and the node's warm-up.
 
 Usage: python bench/bench_dds.py [--seconds 3] [--rates 500,1000,2000] [--modes fixed_lag,causal]
 """
