@@ -156,7 +156,10 @@ def test_continuous_joint_is_unwrapped_across_pi() -> None:
 
 
 def test_partial_messages_from_two_drivers_keep_per_joint_histories_and_ages() -> None:
-    """Arm joint 'a' at 500 Hz and gripper joint 'b' at 100 Hz, in separate messages."""
+    """Arm joint 'a' at 500 Hz and gripper joint 'b' at 100 Hz, in separate messages. Their stamps are
+    irregular (+-10 % of a period): from the start, each stream's estimates wait until its clock has a
+    first look at whether they are write times (40 samples, 0.4 s for the gripper: the estimates from
+    0.35 s on, 175 arm messages)."""
     t = jittered_stamps(1500, seed=9)
     ns = to_ns(t)
     q, _, _ = signal(t)
@@ -169,12 +172,12 @@ def test_partial_messages_from_two_drivers_keep_per_joint_histories_and_ages() -
     stamps, _, _qd, qdd = stacked(out)
     _, _qd_true, qdd_true = truth_at(stamps, t, ns)
     ready = np.array([e.all_ready for e in out])
-    assert ready[60:].all()
-    assert relative_rms(qdd[60:, 0], qdd_true[60:, 0]) <= 2e-3
-    assert relative_rms(qdd[60:, 1], qdd_true[60:, 1]) <= 2e-2  # fewer samples for the gripper
+    assert ready[175:].all()
+    assert relative_rms(qdd[175:, 0], qdd_true[175:, 0]) <= 2e-3
+    assert relative_rms(qdd[175:, 1], qdd_true[175:, 1]) <= 2e-2  # fewer samples for the gripper
     ages = np.array([e.ages for e in out])
     assert np.all(ages[:, 0] == 0.0)  # every stamp is an arm sample
-    assert 0.0 < ages[60:, 1].max() <= 0.011  # the gripper's newest sample is up to 5 periods old
+    assert 0.0 < ages[175:, 1].max() <= 0.011  # the gripper's newest sample is up to 5 periods old
     assert np.all(estimator.ages() >= 0.0)
 
 

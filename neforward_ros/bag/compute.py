@@ -29,7 +29,7 @@ from neforward_ros.computation.raw_samples import RawAssembler
 from neforward_ros.computation.result import Observation, Result
 from neforward_ros.estimation.adaptive import pooled_std
 from neforward_ros.estimation.batch import estimate_at
-from neforward_ros.estimation.clock import written_from
+from neforward_ros.estimation.clock import held_targets, written_from
 from neforward_ros.estimation.coverage import covered_mask
 from neforward_ros.estimation.repeats import repeated
 from neforward_ros.model import RobotModel
@@ -233,7 +233,7 @@ def _whole(
         v = vs[inside][keep]
         use_velocity = settings.estimator.velocity_source != "differentiate" and bool(np.all(np.isfinite(v)))
         groups.setdefault((t_ns.tobytes(), use_velocity), []).append((j, q, v, es[inside][keep]))
-    samples = []  # per group: its members, whether fitted on velocities, stamps, positions, which are fresh
+    samples = []  # per group: members, fitted on velocities or not, stamps, positions, which are fresh, restarts
     for (t_bytes, use_velocity), members in groups.items():
         t_ns = np.frombuffer(t_bytes, dtype=np.int64)
         q = np.stack([q for _, q, _, _ in members], axis=1)
@@ -241,8 +241,9 @@ def _whole(
         fresh = ~repeated(q, gap)  # a driver's repeated reading is no sample: the node leaves it out too
         if written_from(t_ns[fresh], q[fresh], gap[fresh]) is not None:
             return None
-        samples.append((members, use_velocity, t_ns, q, fresh))
-    for members, use_velocity, t_ns, q, fresh in samples:
+        samples.append((members, use_velocity, t_ns, q, fresh, gap))
+    lag = round(settings.estimator.effective_lag * NS)
+    for members, use_velocity, t_ns, q, fresh, gap in samples:
         reach = (t_ns - origin) / NS  # every sample's time, repeated readings too: how far the samples go
         joints = [j for j, _, _, _ in members]
         v = np.stack([v for _, _, v, _ in members], axis=1)
@@ -253,6 +254,8 @@ def _whole(
         stale = _gap_to_samples(t, target_s) > settings.estimator.max_gap
         silent[:, joints] = stale[:, None]
         unready = stale | ~covered_mask(t, target_s, support, _end_slack(reach), reach) | ~reached
+        # as the node, whose start waits for the clock: the estimates made (a degree choice's record), not given
+        held = held_targets(targets, lag, t_ns, q, gap[fresh])
         q_at, qd_at, qdd_at, std_at = estimate_at(
             t,
             q,
@@ -266,6 +269,7 @@ def _whole(
             adaptive=batch.adaptive,
             spread=True,
         )
+        unready |= held
         for column, values in enumerate((q_at, qd_at, qdd_at)):
             values[unready] = np.nan
             state[column][:, joints] = values

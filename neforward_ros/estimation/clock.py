@@ -31,7 +31,7 @@ from __future__ import annotations
 import copy
 import itertools
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 
@@ -110,6 +110,31 @@ times the stamps' spread about the recovered clock is at least this many times t
 its positions read on the two clocks (whichever clock is wrong reads that spread as noise). A joint at
 rest, or one creeping through its encoder's rounding, does not tell: a driver that stamps when it writes
 is not kept on its stamps for having started at rest."""
+HOLD_FOR_CLOCK = True
+"""From a start on irregular stamps, a stream has no estimate until its clock can tell whether the stamps are
+the samples' times or the times a driver wrote them (:meth:`SampleClock.holds_estimates`: a first look at 40
+samples, else the first check, 64-128 samples; at 100 Hz the default's first estimate 0.34 s after the first
+sample instead of 0.11 s on jittered sample stamps). The verdict outlives a restart, which then does not
+wait; the bag tool's whole-recording fit holds the same targets (:func:`held_targets`). Until 2026-11-29 the
+estimates ran on the stamps meanwhile: from a start on write-time stamps (delays to 0.4 of a period, 16 bits,
+100 Hz-1 kHz), the worst error in the first second was up to 122x the steady 99th percentile for the default,
+135x kalman 20 ms (1.83x, 59x since), the cases over 3x 8 and 17 of 18 (0 and 3 since; what is left, and the
+causal settings' 369x, is a writer resting at the start that moves later, where the look at rest cannot tell:
+``bench/bench_write_jitter.py --start``)."""
+JITTER = 0.03
+"""The most an interval between stamps may leave a whole number of usual intervals, as a share of one,
+for the stamps to be regular: a stream whose stamps are irregular from the start (samples stamped with
+jitter, or written a varying delay after them) has its first estimates wait until a check tells which
+they are (:meth:`SampleClock.holds_estimates`). Where the stamps are regular the two clocks agree and
+nothing waits."""
+LOOK_SAMPLES = 40
+"""Samples at which a stream waiting for its clock (:meth:`SampleClock.holds_estimates`) has a first look,
+whatever their span, before a check can decide: the recovered clock's line is drawn by then
+(:data:`FIRST`), and a stream stamped at its jittered samples reads several times more noise on it than on
+its stamps, a writer a few hundredths of it (``test/test_write_clock.py``)."""
+REGULAR_AFTER = 8
+"""Intervals between stamps seen (the first four tell the usual one) before stamps none of which was off by
+:data:`JITTER` are taken to be regular."""
 LEAST_NOISE = 1e-6
 """rad (m): a joint whose positions read less noise than this on the stamps is not compared on the two
 clocks (it rests, or its samples are exact)."""
@@ -333,10 +358,11 @@ class SampleClock:
     :data:`DECISIVE`, the stamps are write times, for the rest of the stream. Once :data:`KEEP_AFTER`
     checks that could tell, made after the first :data:`SPAN` samples, found them to be the samples'
     times, the stream keeps its stamps (:attr:`kept`) and the clock stops: a driver stamps the
-    same way throughout, and the clock costs about 5 us a sample.
+    same way throughout, and the clock costs about 5 us a sample. From a start on irregular stamps, the
+    stream's first estimates wait until it can tell (:meth:`holds_estimates`).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, released: bool = False) -> None:
         self.clock = WriteClock()
         self.written = False
         """Whether the stamps were found to be write times."""
@@ -349,6 +375,12 @@ class SampleClock:
         self._seen = 0  # samples fed
         self._kept_by = 0  # the checks that found the stamps to be the samples' times, after SPAN samples
         self._written_by = 0  # the consecutive checks that found them to be write times
+        self._told = False  # whether a check (or the first look) told the stamps to be the samples' times for now
+        self._jittered = False  # whether an interval left whole usual intervals by more than JITTER of one
+        self.released_at: int | None = 0 if released else None
+        """ns: the stamp of the sample from which the stream's estimates no longer wait for this clock (0: from
+        the start, a restart's clock where the one before let them through; None: not yet). See
+        :meth:`holds_estimates`."""
         self.placings = 0
         """How many times the samples held must be placed on the recovered clock's line (:meth:`retimed`):
         once as the stamps are found to be write times, again each time the clock then jumps onto a line
@@ -362,9 +394,13 @@ class SampleClock:
         usual = median_of_few(self._intervals) if len(self._intervals) >= 4 else None
         if self._last is not None:
             interval = (stamp - self._last) / NS
-            if usual is not None and interval > SILENCE * usual:
+            silence = usual is not None and interval > SILENCE * usual
+            if silence:
                 self._window.clear()
+                self._told = True  # (a stream that pauses or comes in bursts lets its estimates through)
             self._intervals.append(interval)
+            if usual is not None and self.released_at is None and not self._jittered:
+                self._jittered = abs(interval - max(1, round(interval / usual)) * usual) > JITTER * usual
         self._last = stamp
         jumps = self.clock.jumps
         recovered = self.clock.update(stamp, usual)
@@ -382,6 +418,12 @@ class SampleClock:
                     self.clock.settle()
                     recovered = self.clock.recovered
                     self.placings += 1
+            elif self.released_at is None and not self._told and len(self._window) == LOOK_SAMPLES:
+                self._check(look=True)  # (the first look: it never finds write times)
+        if self.released_at is None:
+            regular = not self._jittered and len(self._intervals) >= REGULAR_AFTER
+            if self.written or self._told or regular:
+                self.released_at = stamp
         return recovered
 
     def retimed(self, stamps: np.ndarray) -> np.ndarray:
@@ -392,6 +434,19 @@ class SampleClock:
         times = self.clock.line_times(stamps)
         return np.asarray(stamps, dtype=float) if times is None else times
 
+    def holds_estimates(self, target: int) -> bool:
+        """Whether the estimate at ``target`` (ns) waits for this clock (:attr:`released_at`): from a
+        start, the estimates wait until the stamps are regular (:data:`REGULAR_AFTER` intervals, none
+        off whole usual intervals by more than :data:`JITTER` of one); on irregular ones, until the
+        stamps are found to be write times, or a check (or the first look at :data:`LOOK_SAMPLES`,
+        whatever their span) finds them the samples' times or cannot tell (the joints at rest, where the
+        two clocks make no difference), or a silence comes first (a stream that pauses or comes in
+        bursts, whose checks start afresh after each silence). Held are the targets before the sample
+        at which that happened: once estimates flow, none is held again (a hold is a start's warm-up,
+        never a gap), and a target's fate does not depend on when it is asked (the bag tool, which
+        holds the same targets without replaying the stream, :func:`held_targets`)."""
+        return HOLD_FOR_CLOCK and (self.released_at is None or target < self.released_at)
+
     def _readable(self) -> bool:
         """Whether the window holds enough samples for a check: :data:`NOISE_SAMPLES`, or
         :data:`EARLY_SAMPLES` spanning :data:`DECISIVE_SPAN`."""
@@ -400,9 +455,15 @@ class SampleClock:
             return True
         return held >= EARLY_SAMPLES and self._window[-1][0] - self._window[0][0] >= DECISIVE_SPAN * NS
 
-    def _check(self) -> None:
+    def _check(self, look: bool = False) -> None:
+        """A check of the window (see the class docstring). With ``look``, the first look, before a check
+        can decide: it may only find the stamps to be the samples' times, or find that it cannot tell (the
+        first estimates wait no longer), never vote."""
+        self._told = False
         if not self.clock.holds:  # stamps spread beyond a writer's, or periods miscounted: see _unheld
-            self._unheld()
+            self._told = True
+            if not look:
+                self._unheld()
             return
         stamps, values = zip(*self._window, strict=True)
         first = stamps[0]
@@ -416,14 +477,19 @@ class SampleClock:
         spread = float(np.std(on_stamps - on_clock))
         speed = np.abs(values[-1] - values[0]) / (on_stamps[-1] - on_stamps[0])
         if not (speed * spread > TELLING * np.minimum(noise, clock_noise)).any():
+            self._told = True  # (the two clocks make no difference yet)
             return
         moving = noise > LEAST_NOISE
+        if look:
+            self._told = not stamps_are_write_times(noise, clock_noise, moving)
+            return
         if stamps_are_write_times(noise, clock_noise, moving):
             self._written_by += 1
             decisive = on_stamps[-1] >= DECISIVE_SPAN and stamps_are_write_times(noise, clock_noise, moving, DECISIVE)
             self.written = decisive or self._written_by >= WRITTEN_AFTER
             return
         self._written_by = 0
+        self._told = True
         if self._seen >= SPAN:
             self._kept_by += 1
             self.kept = self._kept_by >= KEEP_AFTER
@@ -452,13 +518,41 @@ def written_from(stamps: np.ndarray, positions: np.ndarray, starts: np.ndarray) 
     """The first sample at which :class:`SampleClock`, fed these samples (stamps ns (T,), positions (T, n))
     in order and started anew where ``starts`` (T,) is set, finds the stamps to be write times; None
     where it never does. Where a clock keeps its stamps, the samples up to the next start are not fed."""
+    found = _first(stamps, positions, starts, lambda clock: clock.written)
+    return None if found is None else found[0]
+
+
+def held_targets(
+    targets: np.ndarray, lag: int, stamps: np.ndarray, positions: np.ndarray, starts: np.ndarray
+) -> np.ndarray:
+    """Which of ``targets`` (ns (K,)) a stream's estimates at a lag of ``lag`` (ns) wait for its clock at
+    (:meth:`SampleClock.holds_estimates`, as the streaming estimator asks it: at the target plus half the
+    lag), its samples fed as :func:`written_from` feeds them (a restart's clock letting them through from
+    its start once one did)."""
+    targets = np.asarray(targets, dtype=np.int64)
+    if not HOLD_FOR_CLOCK:
+        return np.zeros(len(targets), dtype=bool)
+    found = _first(stamps, positions, starts, lambda clock: clock.released_at is not None)
+    if found is None:
+        return np.ones(len(targets), dtype=bool)
+    released_at = found[1].released_at
+    assert released_at is not None
+    return targets + lag // 2 < released_at
+
+
+def _first(
+    stamps: np.ndarray, positions: np.ndarray, starts: np.ndarray, found: Callable[[SampleClock], bool]
+) -> tuple[int, SampleClock] | None:
+    """(the first sample after which ``found`` holds of the :class:`SampleClock` fed these samples (stamps ns
+    (T,), positions (T, n)) in order, started anew where ``starts`` (T,) is set, and that clock); None where
+    it never does. Where a clock keeps its stamps, the samples up to the next start are not fed."""
     edges = [0, *np.flatnonzero(starts).tolist(), len(stamps)]
     for first, stop in itertools.pairwise(edges):
         clock = SampleClock()
         for k in range(first, stop):
             clock.add(int(stamps[k]), positions[k])
-            if clock.written:
-                return k
+            if found(clock):
+                return k, clock
             if clock.kept:
                 break
     return None

@@ -88,6 +88,11 @@ class JointHistory:
         return self._stamps[self.start : self.end]
 
     @property
+    def sample_clock(self) -> SampleClock | None:
+        """The clock the group's samples are timed by: its own (:attr:`clock`), or the Kalman bank's."""
+        return self.clock if self.track is None else self.track.clock
+
+    @property
     def written(self) -> bool:
         """Whether the stamps were found to be write times (the samples' times are then the recovered clock's)."""
         return self.clock is not None and self.clock.written

@@ -185,6 +185,8 @@ class StreamingEstimator:
         self._rule_last = np.full(len(self.joint_names), np.nan)
         # per joint, whether it has had no record since the stream started (HOLD_UNTIL_RECORD)
         self._recordless = np.ones(len(self.joint_names), dtype=bool)
+        # per joint, whether its clock let estimates through since the stream started (clock.HOLD_FOR_CLOCK)
+        self._clock_released = np.zeros(len(self.joint_names), dtype=bool)
         chosen = self.settings.method == "polyfit" and self.settings.adaptive and self.settings.order is None
         # kalman with the bank: its models join the fits' candidates for the same delay, chosen alike
         self._joined = self.settings.method == "kalman" and self.settings.kalman.length_scale == 0
@@ -385,13 +387,19 @@ class StreamingEstimator:
                 continue
             written = group.written
             group.append(stamp, *sample, self._hole_ns)
+            clock = group.sample_clock
+            if clock is not None and clock.released_at is not None:  # (a restart's clock starts so)
+                self._clock_released[group.joints] = True
             if group.written and not written:  # its samples now on the recovered clock: the records of the
                 self._forget_scores(group.joints)  # causal candidates and of the default's degrees were made on
                 if self._degrees is not None:  # the stamps'
                     self._degrees.forget(group.joints)
+                if group.clock.released_at == stamp:  # found as the start waited for the clock: the start
+                    self._recordless[group.joints] = True  # waits for a record on the recovered clock too
             self._watch_innovations(group)
         if fresh:
-            track = None
+            released = bool(self._clock_released[sorted(fresh)].all())  # (a restart: clock.HOLD_FOR_CLOCK)
+            clock, track = SampleClock(released), None
             if self._kalman:  # what was read of the noise before a restart serves until it is read again
                 known = self._noise_memory[sorted(fresh)]
                 noise = tuple(float(known[:, i].max()) if np.isfinite(known[:, i]).all() else None for i in range(2))
@@ -400,10 +408,9 @@ class StreamingEstimator:
                 if seeded is not None and not np.isfinite(seeded).all():
                     seeded = None
                 track = KalmanBank(self.settings.kalman, smooth=self._lag_ns > 0, known_noise=noise,
-                                   known_scores=seeded)  # fmt: skip
-            # the fits' samples on the clock recovered from the stamps where those are write times (the bank
-            # keeps its own)
-            clock = SampleClock() if track is None else None
+                                   known_scores=seeded, clock=clock)  # fmt: skip
+                clock = None  # the fits' samples on the clock recovered from the stamps where those are write
+                # times; the bank keeps its own
             group = JointHistory(sorted(fresh), self._origin, track=track, clock=clock)
             self._groups.append(group)
             for j in group.joints:
@@ -522,7 +529,26 @@ class StreamingEstimator:
             position = group.positions[k]
             given = group.velocities[k]
             velocity = np.where(np.isfinite(given), given, velocity)  # a message velocity is kept as given
+        if self._waits_for_clock(group, target):  # worked out all the same: the candidates' record is made meanwhile
+            state[members, 4] = np.nan
+            return
         state[members, 0], state[members, 1], state[members, 2] = position, velocity, acceleration
+
+    def _waits_for_clock(self, group: JointHistory, target: int) -> bool:
+        """Whether the group's joints wait for its clock at this target (:data:`~.clock.HOLD_FOR_CLOCK`: the
+        targets before the sample at which the clock let estimates through, less half the lag; said once,
+        throttled)."""
+        clock = group.sample_clock
+        if clock is None or not clock.holds_estimates(target + self._lag_ns // 2):
+            return False
+        self._log.every(
+            ("clock", "warm-up"),
+            logging.INFO,
+            f"no estimate yet for joint(s) {', '.join(self.joint_names[j] for j in group.joints)}: their stamps "
+            "are irregular, and from a start the estimator waits until it can tell whether they are the samples' "
+            "times or the times the driver wrote them (40-128 samples)",
+        )
+        return True
 
     def _fit(
         self, target: int, group: JointHistory, exact: bool
