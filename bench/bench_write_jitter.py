@@ -26,7 +26,9 @@ Usage: python bench/bench_write_jitter.py [--rates 100,500,1000] [--delays 0.4] 
 from __future__ import annotations
 
 import argparse
+import itertools
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -95,6 +97,29 @@ def errors(
     return out, estimator
 
 
+def case(
+    kind: str, rate: float, delay: float, bits: int, seed: int, seconds: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(sample times s, positions through ``bits``, true q-ddot, stamps written 0 to ``delay`` periods after
+    the samples, s) of ``seconds`` of a motion sampled on an exact grid at ``rate`` Hz."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(seconds * rate)) / rate
+    q, qdd = motion(kind, t, rng)
+    step = 2 * np.pi / 2**bits
+    return t, np.round(q / step) * step, qdd, t + rng.uniform(0.0, delay / rate, len(t))
+
+
+HEADER = f"{'motion':<10}{'rate':>6}{'delay':>6}{'bits':>5}{'seed':>5}  "
+
+
+def cases(
+    args: argparse.Namespace, seconds: float
+) -> Iterator[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Each case the arguments ask for: its row's label (under :data:`HEADER`) and :func:`case`'s arrays."""
+    for kind, rate, delay, bits, seed in itertools.product(args.kinds, args.rates, args.delays, args.bits, args.seeds):
+        yield f"{kind:<10}{rate:>6g}{delay:>6g}{bits:>5}{seed:>5}  ", *case(kind, rate, delay, bits, seed, seconds)
+
+
 def start_over_steady(
     stamps_s: np.ndarray, q: np.ndarray, qdd: np.ndarray, t: np.ndarray, settings: StreamSettings
 ) -> tuple[float, float]:
@@ -128,18 +153,10 @@ def main() -> None:
         return
     print("stamps written 0 to the longest delay (a share of the period) after the sample; q-ddot relative "
           "RMS error, true stamps -> written stamps (ratio)")  # fmt: skip
-    print(f"{'motion':<10}{'rate':>6}{'delay':>6}{'bits':>5}{'seed':>5}  " + "".join(f"{n:>36}" for n in chosen))
+    print(HEADER + "".join(f"{n:>36}" for n in chosen))
     ratios: dict[str, list[float]] = {name: [] for name in chosen}
     later: dict[str, list[float]] = {name: [] for name in chosen}  # from LATER s on
-    cases = [(k, r, d, b, s) for k in args.kinds for r in args.rates for d in args.delays for b in args.bits
-             for s in args.seeds]  # fmt: skip
-    for kind, rate, delay, bits, seed in cases:
-        rng = np.random.default_rng(seed)
-        t = np.arange(int(8 * rate)) / rate
-        q, qdd = motion(kind, t, rng)
-        step = 2 * np.pi / 2**bits
-        measured = np.round(q / step) * step
-        written = t + rng.uniform(0.0, delay / rate, len(t))
+    for label, t, measured, qdd, written in cases(args, 8.0):
         row = []
         for name, settings in chosen.items():
             (true_error, true_later), _ = errors(t, measured, qdd, t, settings, (1.0, LATER))
@@ -147,7 +164,7 @@ def main() -> None:
             ratios[name].append(written_error / true_error)
             later[name].append(written_later / true_later)
             row.append(f"{true_error:9.2%} -> {written_error:8.2%} ({written_error / true_error:6.1f}x)")
-        print(f"{kind:<10}{rate:>6g}{delay:>6g}{bits:>5}{seed:>5}  " + "".join(f"{c:>36}" for c in row), flush=True)
+        print(label + "".join(f"{c:>36}" for c in row), flush=True)
     print()
     for name, values in ratios.items():
         print(f"{name}: written stamps' error over the true stamps' median {np.median(values):.1f}x, "
@@ -159,22 +176,15 @@ def starts(args: argparse.Namespace, chosen: dict[str, StreamSettings]) -> None:
     """--start: the start on the written stamps, per case and setting (see the module docstring)."""
     print("from a start on stamps written 0 to the longest delay after the sample: the worst q-ddot error in the "
           "first second over the steady 99th percentile (the first estimate's sample time)")  # fmt: skip
-    print(f"{'motion':<10}{'rate':>6}{'delay':>6}{'bits':>5}{'seed':>5}  " + "".join(f"{n:>30}" for n in chosen))
+    print(HEADER + "".join(f"{n:>30}" for n in chosen))
     ratios: dict[str, list[float]] = {name: [] for name in chosen}
-    cases = [(k, r, d, b, s) for k in args.kinds for r in args.rates for d in args.delays for b in args.bits
-             for s in args.seeds]  # fmt: skip
-    for kind, rate, delay, bits, seed in cases:
-        rng = np.random.default_rng(seed)
-        t = np.arange(int(6 * rate)) / rate
-        q, qdd = motion(kind, t, rng)
-        step = 2 * np.pi / 2**bits
-        written = t + rng.uniform(0.0, delay / rate, len(t))
+    for label, t, measured, qdd, written in cases(args, 6.0):
         row = []
         for name, settings in chosen.items():
-            ratio, first = start_over_steady(written, np.round(q / step) * step, qdd, t, settings)
+            ratio, first = start_over_steady(written, measured, qdd, t, settings)
             ratios[name].append(ratio)
             row.append(f"{ratio:8.2f}x ({first:.2f} s)")
-        print(f"{kind:<10}{rate:>6g}{delay:>6g}{bits:>5}{seed:>5}  " + "".join(f"{c:>30}" for c in row), flush=True)
+        print(label + "".join(f"{c:>30}" for c in row), flush=True)
     print()
     for name, values in ratios.items():
         over = sum(v > 3.0 for v in values)

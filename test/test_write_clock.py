@@ -262,14 +262,10 @@ def test_the_samples_held_go_on_the_clock_line_when_write_times_are_found(method
 def _start_over_steady(settings: StreamSettings, rate: float, kind: str, seed: int) -> tuple[float, float]:
     """``bench_write_jitter.start_over_steady`` on 4 s of a motion through 16 bits, from a start on stamps
     written 0 to 0.4 of a period after the samples."""
-    from bench_write_jitter import motion, start_over_steady
+    from bench_write_jitter import case, start_over_steady
 
-    rng = np.random.default_rng(seed)
-    t = np.arange(int(4 * rate)) / rate
-    q, qdd = motion(kind, t, rng)
-    step = 2 * np.pi / 2**16
-    written = t + rng.uniform(0.0, 0.4 / rate, len(t))
-    return start_over_steady(written, np.round(q / step) * step, qdd, t, settings)
+    t, measured, qdd, written = case(kind, rate, 0.4, 16, seed, 4.0)
+    return start_over_steady(written, measured, qdd, t, settings)
 
 
 START_CASES = [(StreamSettings(), "sines1.5", 101), (StreamSettings(method="kalman"), "gait", 101)]
