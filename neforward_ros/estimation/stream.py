@@ -185,7 +185,7 @@ class StreamingEstimator:
         self._rule_last = np.full(len(self.joint_names), np.nan)
         # per joint, whether it has had no record since the stream started (HOLD_UNTIL_RECORD)
         self._recordless = np.ones(len(self.joint_names), dtype=bool)
-        # per joint, whether its clock let estimates through since the stream started (clock.HOLD_FOR_CLOCK)
+        # per joint, whether a clock of a group it left had let estimates through (clock.HOLD_FOR_CLOCK)
         self._clock_released = np.zeros(len(self.joint_names), dtype=bool)
         chosen = self.settings.method == "polyfit" and self.settings.adaptive and self.settings.order is None
         # kalman with the bank: its models join the fits' candidates for the same delay, chosen alike
@@ -257,6 +257,8 @@ class StreamingEstimator:
         """Forget every history (a new stream starts)."""
         if not keep_timeline:
             self._timeline.reset()
+        for group in self._groups:
+            self._remember_clock(group, group.joints)
         self._groups = []
         self._group_of = [None] * len(self.joint_names)
         self._pending.clear()
@@ -387,9 +389,6 @@ class StreamingEstimator:
                 continue
             written = group.written
             group.append(stamp, *sample, self._hole_ns)
-            clock = group.sample_clock
-            if clock is not None and clock.released_at is not None:  # (a restart's clock starts so)
-                self._clock_released[group.joints] = True
             if group.written and not written:  # its samples now on the recovered clock: the records of the
                 self._forget_scores(group.joints)  # causal candidates and of the default's degrees were made on
                 if self._degrees is not None:  # the stamps'
@@ -440,12 +439,20 @@ class StreamingEstimator:
         return np.sqrt(self._rule_spread[0, joints] / np.maximum(self._rule_spread[1, joints], 1e-300))
 
     def _forget(self, group: JointHistory, joints: list[int]) -> None:
+        self._remember_clock(group, joints)
         group.remove(joints)
         self._forget_scores(joints, keep_record=CARRY_RECORDS)
         for j in joints:
             self._group_of[j] = None
         if not group.joints:
             self._groups.remove(group)
+
+    def _remember_clock(self, group: JointHistory, joints: list[int]) -> None:
+        """As these joints leave the group (a restart): whether its clock had let estimates through, which
+        their next group's clock starts with (clock.HOLD_FOR_CLOCK)."""
+        clock = group.sample_clock
+        if clock is not None and clock.released_at is not None:
+            self._clock_released[joints] = True
 
     def _split(self, group: JointHistory, joints: list[int]) -> JointHistory:
         moved = group.split(joints)
