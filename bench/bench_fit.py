@@ -1,6 +1,6 @@
 """The whole-recording adaptive fit's cost per target, in one run: one degree (4), two degrees fused
 (6 and 4, the default before 2026-11-25) and the default's three degrees each with its windows chosen
-(6, 4 and 2, among which estimation/degree_choice.py chooses), each one C call. The batch takes each
+(6, 4 and 3, among which estimation/degree_choice.py chooses), each one C call. The batch takes each
 block of targets' sixth differences from one pass (see neforward_ros/estimation/native_fit.py).
 
 A synthetic recording: 8 joints at 500 Hz with ±2 % stamp jitter, sines with 1e-5 rad noise rounded
@@ -34,7 +34,7 @@ def main() -> None:
     runs = {
         "degree 4": lambda: adaptive.adaptive_fits(t, y, t, 0.1, 4, 0.1),
         "degrees 6 and 4 fused": lambda: adaptive.adaptive_fits(t, y, t, 0.1, 6, 0.1, lower=4),
-        "degrees 6, 4, 2 (default)": lambda: adaptive.degree_fits(t, y, t, 0.1, (6, 4, 2), 0.1),
+        "degrees 6, 4, 3 (default)": lambda: adaptive.degree_fits(t, y, t, 0.1, (6, 4, 3), 0.1),
     }
     times: dict[str, list[float]] = {name: [] for name in runs}
     for _ in range(args.repeats):
@@ -47,7 +47,7 @@ def main() -> None:
     for name, value in median.items():
         print(f"  {name:<30} {value:7.2f}")
     print(f"fused over degree 4: {median['degrees 6 and 4 fused'] / median['degree 4']:.2f}x")
-    three = median["degrees 6, 4, 2 (default)"] / median["degrees 6 and 4 fused"]
+    three = median["degrees 6, 4, 3 (default)"] / median["degrees 6 and 4 fused"]
     print(f"the default's three over the two fused: {three:.2f}x")
 
 

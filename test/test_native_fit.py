@@ -84,6 +84,11 @@ def test_c_and_numpy_choose_the_same_windows_and_agree_to_rounding() -> None:
         chosen = np.abs(np.stack(want[:3])[k, columns])
         rounding = bound * (chosen + want[3] * h ** (2 - k) + 1e-5 * np.abs(y).max(axis=0) / h**k)
         assert np.all(np.abs(got[3] - want[3]) <= 1e-6 * want[3] + 2.0 * rounding)
+        # the degree choice's two: the chosen level's noise, and the noise's between it and the level
+        # the stated spread is measured against (a difference of two levels' variances)
+        full = adaptive._numpy_fit(t, y, target, h, order, lead, derivative, lower)
+        np.testing.assert_allclose(got[5], full[3], rtol=1e-6)
+        np.testing.assert_allclose(got[6], full[6], rtol=1e-5, atol=1e-6 * float(np.max(full[3])))
         if still:  # a still joint: rounding only, within its stated floor
             assert abs(got[2][0]) <= 1e-6 and abs(want[2][0]) <= 1e-6
     assert worst > 0.0  # two computations, not one
@@ -148,6 +153,8 @@ def test_further_degrees_from_one_call_are_each_degrees_own_numbers() -> None:
         one = adaptive.degree_fit(t[lo:hi], y[lo:hi], t[i], 0.1, (6, 4, 2), 0.1, np.full(n, 2))
         for k in range(4):
             np.testing.assert_array_equal(one[k], whole[k][:, i])
+        np.testing.assert_array_equal(one[5], whole[4][:, i])  # the noise's deviation
+        np.testing.assert_array_equal(one[6], whole[5][:, i])  # and the noise's between it and its neighbour
 
 
 def test_targets_with_too_few_samples_take_numpy_and_no_compiler_takes_numpy_everywhere(monkeypatch) -> None:

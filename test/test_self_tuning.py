@@ -135,7 +135,7 @@ def coloured_honesty(rate: float, cutoff: float, seed: int, monkeypatch=None) ->
     coloured noise (white noise through a 2nd-order low-pass at ``cutoff``, 2e-4 rad RMS: a real
     arm's logged positions have most of their noise well below the sampling rate's Nyquist
     frequency), stamps jittered by +-30 %. ``monkeypatch``: the stated sigma left unpooled (each
-    estimate's own, without the degree choice's mean squared error over the last second either)."""
+    estimate's own) and the noise taken as white (the degree choice's colour c left at 1)."""
     from scipy.signal import butter, lfilter
 
     rng = np.random.default_rng(seed)
@@ -145,11 +145,18 @@ def coloured_honesty(rate: float, cutoff: float, seed: int, monkeypatch=None) ->
     noise = lfilter(b, a, rng.normal(0.0, 1.0, (count, 2)), axis=0)
     q = np.stack([chirp(t, 2.0, s)[0] for s in (0.0, 1.0)], axis=1) + 2e-4 * noise / noise.std(axis=0)
     truth = np.stack([chirp(t, 2.0, s)[1] for s in (0.0, 1.0)], axis=1)
-    if monkeypatch is not None:  # neither the last half window's deviations nor the last second's scores
+    if monkeypatch is not None:  # neither the last half window's deviations nor the noise's colour
         monkeypatch.setattr(DeviationPool, "state", lambda self, stamp, own: own)
-        unscored = degree_choice.chosen_std
-        monkeypatch.setattr(degree_choice, "chosen_std", lambda a, s, c, error: unscored(a, s, c, 0.0 * error))
-        # the node's choice in numpy, where chosen_std states the deviation (its C states it itself)
+        coloured = degree_choice.terms
+
+        def white(accelerations: np.ndarray, *deviations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            rows, counted = coloured(accelerations, *deviations)
+            rows = rows.copy()
+            rows[2 * len(accelerations)] = 0.0  # the reference's distances beyond its noise: c = 1
+            return rows, counted
+
+        monkeypatch.setattr(degree_choice, "terms", white)
+        # the node's choice in numpy, where terms makes the sums (its C makes them itself)
         uncompiled = SimpleNamespace(FIT=SimpleNamespace(get=lambda wait=False: None))
         monkeypatch.setattr(degree_choice, "native_fit", uncompiled)
     index, estimate, std = run(StreamSettings(), EPOCH_NS + np.round(t * 1e9).astype(np.int64), q)
@@ -163,8 +170,10 @@ def test_the_stated_deviation_holds_under_coloured_noise(rate: float, colour: fl
     Panda's recording: ``bench/bench_realdata.py``): RMS of error / sigma within 0.5..2 there, here
     within 0.3..2, for noise coloured at 5-20 % of the rate, well above the motion's band (noise
     within the motion's band, 10 Hz at 200 Hz, is motion to any estimator: RMS z 2.3-2.5 there).
-    Each estimate's own sigma reads the bias and the coloured noise by one draw; pooled over the
-    last half window's (adaptive.DeviationPool) it holds. Unpooled (the mutation), it did not."""
+    The degree choice reads the noise's colour off the reference's distances to its next window over
+    the last second and states each estimate's coloured noise (RMS z 1.4-1.7 unpooled); pooled over
+    the last half window's (adaptive.DeviationPool) too. Neither (the mutation: unpooled, and the
+    colour left at 1), it does not hold."""
     honesty = coloured_honesty(rate, colour * rate, seed)
     assert np.all((honesty >= 0.3) & (honesty <= 2.0)), honesty.round(2)
     unpooled = coloured_honesty(rate, colour * rate, seed, monkeypatch)

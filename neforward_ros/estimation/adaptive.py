@@ -59,7 +59,7 @@ the last half window's estimates, where larger than the estimate's own (the Pand
 sigma 1.13-1.59; the family's median 0.80, 76 % of its motions within 0.5-2). The
 windows chosen and the two degrees' fusion stay on the noise alone: the estimates are the same.
 
-The default fit runs the rule at degrees 6, 4 and 2 and chooses each joint's degree by the last second's
+The default fit runs the rule at degrees 6, 4 and 3 and chooses each joint's degree by the last second's
 estimates (:mod:`.degree_choice`). Two degrees can also be fused (``lower``: the centred fit the causal
 setting is scored against): the degree-4 choice where the two agree within G of their combined
 deviations and it is the less noisy, the degree-6 one elsewhere: a slow, noisy motion keeps the quieter
@@ -441,13 +441,30 @@ def stated_std(estimates: np.ndarray, valid: np.ndarray, chosen: np.ndarray, std
     (the rule strained: even that window's bias broke the intersection, or nothing smaller fits), to
     the next larger level's instead (whose bias is larger: a bound, not an estimate); the noise alone
     where only one level is valid."""
-    below = np.minimum(chosen + 1, len(estimates) - 1)[None]
+    other, found = _neighbour(valid, chosen)
+    apart = np.take_along_axis(estimates, chosen[None], 0)[0] - np.take_along_axis(estimates, other, 0)[0]
+    return np.where(found, np.sqrt(std * std + apart * apart), std)
+
+
+def between_std(valid: np.ndarray, chosen: np.ndarray, stds: np.ndarray) -> np.ndarray:
+    """The deviation that the noise alone puts between the chosen level's estimate and the level
+    :func:`stated_std` measures its distance to (...): the root of the difference of their noise's
+    variances (``stds`` (L, ...), each level's; the chosen fit is the best one on the samples both
+    windows hold, so the other differs from it by the rest); 0 where only one level is valid. What of
+    that distance lies beyond it is the noise's colour or a bias (:mod:`.degree_choice`)."""
+    other, found = _neighbour(valid, chosen)
+    own, theirs = np.take_along_axis(stds, chosen[None], 0)[0], np.take_along_axis(stds, other, 0)[0]
+    return np.where(found, np.sqrt(np.abs(theirs * theirs - own * own)), 0.0)
+
+
+def _neighbour(valid: np.ndarray, chosen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The level (1, ...) whose estimate :func:`stated_std` measures the chosen one's distance to: the
+    next smaller valid one, else the next larger; and whether there is one (...)."""
+    below = np.minimum(chosen + 1, len(valid) - 1)[None]
     smaller = (below[0] > chosen) & np.take_along_axis(valid, below, 0)[0]
     above = np.maximum(chosen - 1, 0)[None]
     larger = ~smaller & (above[0] < chosen) & np.take_along_axis(valid, above, 0)[0]
-    other = np.where(smaller, below[0], above[0])[None]
-    apart = np.take_along_axis(estimates, chosen[None], 0)[0] - np.take_along_axis(estimates, other, 0)[0]
-    return np.where(smaller | larger, np.sqrt(std * std + apart * apart), std)
+    return np.where(smaller, below[0], above[0])[None], smaller | larger
 
 
 PRECISION = 1e4
@@ -728,7 +745,7 @@ def adaptive_fits(
         lead: the largest reach past the target, s (h_max for a centred fit, 0 for a causal one).
         lower: a second, lower degree whose choice is :func:`fused` with ``order``'s; None: ``order`` alone.
     """
-    value, first, second, std = degree_fits(t, y, targets, h_max, (order,), lead, derivative, lower)
+    value, first, second, std, *_ = degree_fits(t, y, targets, h_max, (order,), lead, derivative, lower)
     return (np.ascontiguousarray(value[0]), np.ascontiguousarray(first[0]), np.ascontiguousarray(second[0]),
             np.ascontiguousarray(std[0]))  # fmt: skip
 
@@ -742,10 +759,13 @@ def degree_fits(
     lead: float,
     derivative: int = 2,
     lower: int | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, ...]:
     """:func:`adaptive_fits` at each degree of ``degrees`` (the first the highest; ``lower`` fused with
     it alone), each with its own windows chosen, in one C call: the power sums and the noise reading
-    shared, the numbers those of one call per degree to rounding. Four (D, M, n)."""
+    shared, the numbers those of one call per degree to rounding. Value, first and second derivative,
+    the derivative's stated standard deviation, its noise's (the chosen window's fit's own, without the
+    distance to the neighbouring window's) and the noise's between the two (:func:`between_std`); the
+    last two are the degree choice's (:mod:`.degree_choice`). Each (D, M, n)."""
     library = native_fit.FIT.get(wait=len(targets) >= native_fit.WORTH_WAITING)
     columns = np.full(y.shape[1], derivative)
     got = None if library is None else native_fit.fits(library, t, y, targets, *_ladder_and_leads(h_max, lead),
@@ -753,19 +773,19 @@ def degree_fits(
                                                        LATTICE, lower, tuple(degrees[1:]))  # fmt: skip
     fused_with = [lower] + [None] * (len(degrees) - 1)
     if got is None:
-        fits = [python_adaptive_fits(t, y, targets, h_max, degree, lead, derivative, fused)
+        fits = [_numpy_fits(t, y, targets, h_max, degree, lead, derivative, fused)
                 for degree, fused in zip(degrees, fused_with, strict=True)]  # fmt: skip
-        value, first, second, std = (np.stack(entries) for entries in zip(*fits, strict=True))
-        return value, first, second, std
+        value, first, second, noise, stated, between = (np.stack(entries) for entries in zip(*fits, strict=True))
+        return value, first, second, stated, noise, between
     out, done = got
-    value, first, second, std = (out[:, :, q].transpose(1, 0, 2) for q in range(4))  # views
+    value, first, second, stated, noise, between = (out[:, :, q].transpose(1, 0, 2) for q in (0, 1, 2, 3, 5, 6))
     rest = np.flatnonzero(~done)  # too few samples in a target's largest window: numpy's fits serve there
     for k, (degree, fused) in enumerate(zip(degrees, fused_with, strict=True)):
         if len(rest):
-            numpy_fits = python_adaptive_fits(t, y, targets[rest], h_max, degree, lead, derivative, fused)
-            for whole, part in zip((value, first, second, std), numpy_fits, strict=True):
+            numpy_fits = _numpy_fits(t, y, targets[rest], h_max, degree, lead, derivative, fused)
+            for whole, part in zip((value, first, second, noise, stated, between), numpy_fits, strict=True):
                 whole[k, rest] = part
-    return value, first, second, std
+    return value, first, second, stated, noise, between
 
 
 def python_adaptive_fits(
@@ -779,7 +799,7 @@ def python_adaptive_fits(
     lower: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`adaptive_fits` in numpy (two degrees fused: each fitted on its own)."""
-    value, first, second, _, stated = _numpy_fits(t, y, targets, h_max, order, lead, derivative, lower)
+    value, first, second, _, stated, _ = _numpy_fits(t, y, targets, h_max, order, lead, derivative, lower)
     return value, first, second, stated
 
 
@@ -794,7 +814,8 @@ def _numpy_fits(
     lower: int | None,
 ) -> tuple[np.ndarray, ...]:
     """:func:`python_adaptive_fits` with the noise's standard deviation before the stated one: value,
-    first and second derivative, noise's and stated standard deviation (M, n)."""
+    first and second derivative, noise's and stated standard deviation, and the noise's between the
+    estimate and its neighbouring level's (:func:`between_std`) (M, n)."""
     if lower is not None:
         high = _numpy_fits(t, y, targets, h_max, order, lead, derivative, None)
         return fused(high, _numpy_fits(t, y, targets, h_max, lower, lead, derivative, None), derivative)
@@ -808,7 +829,7 @@ def _numpy_fits(
     more = np.flatnonzero((first < lo) & (hi - first >= 8))
     if len(more):  # the white noise read from more samples too: the larger
         white[more] = np.maximum(white[more], _window_noise(t, y, first[more], hi[more])[0])
-    out = [np.empty((len(targets), y.shape[1])) for _ in range(5)]
+    out = [np.empty((len(targets), y.shape[1])) for _ in range(6)]
     for start in range(0, len(targets), BLOCK):  # a block of targets at a time: its levels stay in cache
         part = slice(start, start + BLOCK)
         chosen = _block_fits(t, y, targets[part], levels, order, lead, derivative, white[part], step[part], changed,
@@ -832,10 +853,11 @@ def _block_fits(
     turned: np.ndarray,
 ) -> list[np.ndarray]:
     """:func:`adaptive_fits` for a block of targets, with their windows' noise: value, first and
-    second derivative, and the chosen derivative's noise's and stated standard deviation
-    (:func:`stated_std`) (M, n). Levels whose window is too small at every target of the block are
-    not fitted. ``changed``, ``turned``: y's :func:`changes_up_to` and :func:`turns`; a window's
-    rounding errors are counted as the fewer of its changes and its turns."""
+    second derivative, the chosen derivative's noise's and stated standard deviation (:func:`stated_std`)
+    and the noise's between it and its neighbouring level's (:func:`between_std`) (M, n). Levels whose
+    window is too small at every target of the block are not fitted. ``changed``, ``turned``: y's
+    :func:`changes_up_to` and :func:`turns`; a window's rounding errors are counted as the fewer of its
+    changes and its turns."""
     needed = order + 3
     fits = []
     changes = []
@@ -859,7 +881,7 @@ def _block_fits(
     pick = chosen[None]
     picked = [np.take_along_axis(np.stack([f[i] for f in fits]), pick, 0)[0] for i in range(3)]
     noise = np.take_along_axis(stds, pick, 0)[0]
-    return [*picked, noise, stated_std(estimates, valid, chosen, noise)]
+    return [*picked, noise, stated_std(estimates, valid, chosen, noise), between_std(valid, chosen, stds)]
 
 
 def adaptive_fit(
@@ -882,7 +904,9 @@ def adaptive_fit(
     vectorised pass, with the arithmetic of :func:`neforward_ros.estimation.fit.polynomial_fits`; or,
     once compiled, the same in one C call (:mod:`neforward_ros.estimation.native_fit`). ``lower``: as
     for :func:`adaptive_fits`."""
-    value, first, second, std, strained = degree_fit(times, values, target, h_max, (order,), lead, derivative, lower)
+    value, first, second, std, strained, *_ = degree_fit(
+        times, values, target, h_max, (order,), lead, derivative, lower
+    )
     return value[0], first[0], second[0], std[0], strained[0]
 
 
@@ -895,9 +919,10 @@ def degree_fit(
     lead: float,
     derivative: np.ndarray,
     lower: int | None = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+) -> tuple[np.ndarray, ...]:
     """:func:`adaptive_fit` at each degree of ``degrees`` (the first the highest; ``lower`` fused with
-    it alone), in one C call (:func:`degree_fits`). Five (D, n)."""
+    it alone), in one C call (:func:`degree_fits`): its five, then the noise's standard deviation and
+    the noise's between the estimate and its neighbouring level's (:func:`degree_fits`), each (D, n)."""
     library = native_fit.FIT.get()
     if library is not None:
         got = native_fit.fit(
@@ -907,10 +932,10 @@ def degree_fit(
         if got is not None:
             return got
     fused_with = [lower] + [None] * (len(degrees) - 1)
-    fits = [python_adaptive_fit(times, values, target, h_max, degree, lead, derivative, fused)
+    fits = [_numpy_fit(times, values, target, h_max, degree, lead, derivative, fused)
             for degree, fused in zip(degrees, fused_with, strict=True)]  # fmt: skip
-    value, first, second, std, strained = (np.stack(entries) for entries in zip(*fits, strict=True))
-    return value, first, second, std, strained
+    value, first, second, noise, strained, stated, between = (np.stack(entries) for entries in zip(*fits, strict=True))
+    return value, first, second, stated, strained, noise, between
 
 
 def python_adaptive_fit(
@@ -924,7 +949,8 @@ def python_adaptive_fit(
     lower: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`adaptive_fit` in numpy (two degrees fused: each fitted on its own)."""
-    value, first, second, _, strained, stated = _numpy_fit(times, values, target, h_max, order, lead, derivative, lower)
+    value, first, second, _, strained, stated, _ = _numpy_fit(times, values, target, h_max, order, lead, derivative,
+                                                              lower)  # fmt: skip
     return value, first, second, stated, strained
 
 
@@ -939,7 +965,8 @@ def _numpy_fit(
     lower: int | None,
 ) -> tuple[np.ndarray, ...]:
     """:func:`python_adaptive_fit`'s value, first and second derivative, noise's standard deviation,
-    strain and stated standard deviation (n,)."""
+    strain, stated standard deviation and the noise's between the estimate and its neighbouring level's
+    (:func:`between_std`) (n,)."""
     if lower is not None:
         high = _numpy_fit(times, values, target, h_max, order, lead, derivative, None)
         return fused(high, _numpy_fit(times, values, target, h_max, lower, lead, derivative, None), derivative)
@@ -965,7 +992,7 @@ def _numpy_fit(
     valid = posed(valid, pivots)
     if not valid[0]:  # the largest window's samples do not determine the polynomial: no estimate
         nothing = np.full(values.shape[1], np.nan)
-        return nothing, nothing, nothing, nothing, np.zeros(values.shape[1], dtype=bool), nothing
+        return nothing, nothing, nothing, nothing, np.zeros(values.shape[1], dtype=bool), nothing, nothing
     second = derivative == 2
     estimates = np.where(second, d2, d1)
     variance = np.where(second, var2[:, None], var1[:, None])
@@ -987,4 +1014,5 @@ def _numpy_fit(
         noise,
         ((chosen == smallest) & (smallest > 0)) | rough,
         stated_std(estimates, usable, chosen, noise),
+        between_std(usable, chosen, stds),
     )

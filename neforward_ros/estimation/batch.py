@@ -223,16 +223,13 @@ def _chosen_block(
     degrees = degree_choice.DEGREES
     options = degree_fits(t, q, targets, half_width, degrees, half_width)  # each (D, M, m)
     if velocity is not None:
-        value, first, _, stated = degree_fits(t, velocity, targets, half_width, degrees, half_width, derivative=1)
-        options = (options[0], value, first, stated)
+        value, first, _, *deviations = degree_fits(t, velocity, targets, half_width, degrees, half_width, derivative=1)
+        options = (options[0], value, first, *deviations)
     library = native_fit.FIT.get()
     if library is not None:
         chosen, std = native_fit.choose_degrees(library, stamps_ns, round(degree_choice.MEMORY * NS), options[2],
-                                                options[3], counted, degree_choice.LEAST, GAMMA)  # fmt: skip
+                                                *options[3:], counted, degree_choice.LEAST, GAMMA)  # fmt: skip
     else:
-        chosen, error = degree_choice.choose(
-            stamps_ns, np.where(counted, options[2], np.nan), np.where(counted, options[3], np.nan)
-        )
-        std = degree_choice.chosen_std(options[2], options[3], chosen, error)
+        chosen, std = degree_choice.choose(stamps_ns, *(np.where(counted, option, np.nan) for option in options[2:]))
     q_at, qd_at, qdd_at = (degree_choice.pick(entries, chosen) for entries in options[:3])
     return q_at, qd_at, qdd_at, std

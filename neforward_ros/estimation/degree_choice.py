@@ -1,25 +1,46 @@
 """The default fit's polynomial degree, chosen per joint by the recent estimates' errors.
 
 The adaptive rule (:mod:`.adaptive`) chooses each estimate's window well for a given degree, but no
-degree suits every motion: a slow sine through a 12-bit encoder wants degree 2 over the widest window
-(degree 4's noise there is 2.5-3x larger), a 3 Hz sine degree 6 (degree 4's bias cuts its windows
-short: 2-3x the error). Joining two degrees estimate by estimate (the lower one where the two agree
-within the rule's intervals) let degree 4's bias through where degree 6 was right, and could not take
-degree 2 without letting its bias through too: one estimate's difference between degrees is one
-draw of the noise. Over a second of estimates it is not.
+degree suits every motion: a slow sine through a 12-bit encoder wants a low degree over the widest
+window (degree 4's noise there is 2.5-3x larger), a 3 Hz sine degree 6 (degree 4's bias cuts its
+windows short: 2-3x the error). Joining two degrees estimate by estimate (the lower one where the two
+agree within the rule's intervals) let degree 4's bias through where degree 6 was right: one
+estimate's difference between degrees is one draw of the noise. Over a second of estimates it is not.
 
-Each estimate runs the rule at every degree of :data:`DEGREES`. With the first (the highest, the
-least biased) as the reference r, the mean squared error of degree k's estimate a is
+Each estimate runs the rule at every degree of :data:`DEGREES`: 6, 4 and 3. (3, not 2: in a window
+symmetric about the estimate the two give the same q'', but jittered stamps and dropped repeats make
+windows lopsided, and there degree 2 takes the motion's third derivative into q'': up to 2x hindsight
+on slow sines at 100 Hz with repeats, where degree 3 gives 1.0-1.2x.) For two of them, a lower
+degree's estimate a and a higher one's b, the difference of their mean squared errors is
 
-    E[(a - r)^2] - var(r) + 2 cov(a, r),
+    E[(a - b)^2] - 2 (var(b) - var(a)),
 
-and cov(a, r) = var(a) where a's fit is the best linear one on a window that holds r's (a linear
-unbiased estimate cannot beat it, so r - a is uncorrelated with a), which is how the rule's windows
-come out: a lower degree keeps a wider window. var(r) is the same for every k. So each degree scores,
-per joint, the mean over the last :data:`MEMORY` of its estimates' (a - r)^2 + 2 s_a^2, s_a the rule's
-stated deviation for a (its noise and its distance to the next smaller window, which reads what the
-noise reading misses), and the least score wins. The reference's own score is 2 s_r^2, its bias
-taken as zero.
+since cov(a, b) = var(a) where a's fit is the best linear one on a window that holds b's (a linear
+unbiased estimate cannot beat it, so b - a is uncorrelated with a), which is how the rule's windows
+come out: a lower degree keeps a wider window. From the first degree (the highest, the least biased:
+the reference r) down, each degree's score adds its step from the one before: per joint, over the
+estimates of the last :data:`MEMORY`, the mean of the squared steps down to degree k plus 2 c v_k^2
+(the reference's own score 2 c v_r^2), and the least score wins. (Each step compares neighbours: the
+reference's noise, the largest, does not enter the choice between 4 and 3, as it did when every degree
+was scored by its distance to the reference; a second holds only about five of the widest window's
+lengths, and with that noise in, degree 4 was taken at a third of the estimates of a slow sine where 3
+alone gives 0.77x hindsight: 1.49x.) v_k is the rule's noise for degree k (its fit's own deviation,
+from the noise read off the samples) and c the noise's *colour*, how much more than that the estimates
+vary. The stated deviation (the noise and the distance to the next smaller window, in quadrature)
+would not do for var: where the noise is white that distance is mostly the smaller window's noise,
+about twice the estimate's own deviation, and scoring on it charged the noisier degrees 2-5x their
+variance (degree 4 lost to degree 2's bias on slow sines through 16 bits: 1.6-2.1x hindsight). The
+noise alone charges too little where the noise is coloured (a real arm's measured velocities: the
+noise read off its samples is 2-3x below the estimates' spread), and then degree 6 wins everywhere.
+c is read from the reference's same second: the sum of its squared distances to its next smaller
+window (s_r^2 - v_r^2) over the sum of what the noise read would put there (w_r^2, the difference of
+the two windows' noise variances: :func:`~.adaptive.between_std`), at least 1.
+
+The deviation stated with the chosen estimate is its coloured noise, c v_a^2, the distance to its
+next smaller window beyond what that noise puts there (a bias the rule let through, a trapezoid's
+corner), and its distance to the reference beyond the reference's coloured noise, added in
+quadrature; or where larger, the root of its mean squared error over the last second as the scores
+tell it (its score less c v_r^2, the reference's mean squared error).
 
 The node (:class:`DegreePool`, one estimate at a time) and the whole-recording estimate
 (:func:`choose`) pool the same estimates: those of the same stream (a restart forgets them) that were
@@ -36,7 +57,7 @@ from neforward_ros.estimation import native_fit
 from neforward_ros.estimation.adaptive import GAMMA, StampedRows, window_sums
 from neforward_ros.stamps import NS
 
-DEGREES = (6, 4, 2)
+DEGREES = (6, 4, 3)
 """The degrees the default fit chooses among, the reference (the least biased) first."""
 MEMORY = 1.0
 """s: the estimates a choice is made on (stamps in (s - MEMORY, s])."""
@@ -48,60 +69,86 @@ on, 5.5x with 20; the degree with the least deviation among those agreeing with 
 estimate, as the two degrees' fusion chose, 6.8x too)."""
 
 
-def terms(accelerations: np.ndarray, stated: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each estimate's contribution to each degree's score, (a - r)^2 + 2 s_a^2, and whether it
-    counts (every degree's estimate and deviation finite), from the degrees' accelerations and stated
-    deviations (D, ...), the reference first. Returns two (D, ...); 0 where not counted."""
-    accelerations = np.asarray(accelerations, dtype=float)
-    stated = np.asarray(stated, dtype=float)
-    finite = np.all(np.isfinite(accelerations) & np.isfinite(stated), axis=0)
-    apart = np.where(finite, accelerations - accelerations[0], 0.0)
-    spread = np.where(finite, stated, 0.0)
-    counted = np.broadcast_to(finite, accelerations.shape).astype(float)
-    return apart * apart + 2.0 * spread * spread, counted
+def terms(
+    accelerations: np.ndarray, stated: np.ndarray, noise: np.ndarray, between: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each estimate's terms of the choice's sums and whether it counts (every degree's estimate and
+    deviations finite), from the degrees' accelerations, stated deviations, noise's deviations and the
+    noise's deviations between each estimate and its neighbouring window's (D, ...), the reference
+    first: each degree's squared step from the one before, (a_k - a_(k-1))^2 (0 for the reference),
+    then v_a^2 for each, then the reference's squared distance to
+    its neighbour, s_r^2 - v_r^2 (at least 0), and what its noise alone puts there, w_r^2; and 1 or 0
+    alike for each. Two (2 D + 2, ...), the terms 0 where not counted."""
+    accelerations, stated, noise, between = (
+        np.asarray(x, dtype=float) for x in (accelerations, stated, noise, between)
+    )
+    finite = np.all(
+        np.isfinite(accelerations) & np.isfinite(stated) & np.isfinite(noise) & np.isfinite(between), axis=0
+    )
+    steps = np.concatenate([np.zeros_like(accelerations[:1]), np.diff(accelerations, axis=0)])
+    apart = np.where(finite, steps, 0.0)
+    own = np.where(finite, noise, 0.0)
+    reference = np.where(finite, stated[0], 0.0)
+    beside = np.maximum(reference * reference - own[0] * own[0], 0.0)
+    expected = np.where(finite, between[0], 0.0)
+    rows = np.concatenate([apart * apart, own * own, beside[None], (expected * expected)[None]])
+    return rows, np.broadcast_to(finite, rows.shape).astype(float)
 
 
 def _least(
-    total: np.ndarray, count: np.ndarray, accelerations: np.ndarray, stated: np.ndarray
+    total: np.ndarray,
+    count: np.ndarray,
+    accelerations: np.ndarray,
+    stated: np.ndarray,
+    noise: np.ndarray,
+    between: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The degree index (..., n) with the least mean score, the degree axis the second to last of
-    ``total`` and ``count`` (..., D, n); the reference's where fewer than :data:`LEAST` counted, or
-    where the degree's estimate leaves the reference's by more than :data:`~.adaptive.GAMMA` of their
-    combined deviations (``accelerations``, ``stated``: (D, ..., n), this estimate's). And the chosen
-    degree's mean squared error over the window as its scores tell it (its mean score less var(r),
-    half the reference's; 0 where fewer counted)."""
-    counted = count[..., 0, :] >= LEAST  # every degree's estimates count alike
-    mean = total / np.maximum(count, 1.0)
-    chosen = np.where(counted, np.argmin(mean, axis=-2), 0)
+    """The degree index (..., n) with the least mean score and the standard deviation stated with its
+    estimate (..., n), from the sums of :func:`terms` over the window (``total`` (..., 2 D + 2, n), the
+    terms' axis the second to last) and the estimates counted (``count`` (..., K, n), its first entry
+    along that axis the count), and this estimate's accelerations, stated deviations, noise's
+    deviations and those between each and its neighbour (D, ..., n). The reference's where fewer than
+    :data:`LEAST` counted, or where the degree's estimate leaves the reference's by more than
+    :data:`~.adaptive.GAMMA` of their combined stated deviations."""
+    degrees = len(accelerations)
+    number = np.maximum(count[..., :1, :], 1.0)
+    counted = count[..., 0, :] >= LEAST
+    beside, expected = total[..., 2 * degrees, :], total[..., 2 * degrees + 1, :]
+    colour = np.where(expected > 0.0, np.maximum(beside / np.where(expected > 0.0, expected, 1.0), 1.0), 1.0)
+    steps = np.cumsum(total[..., :degrees, :], axis=-2)  # from the reference down to each degree
+    score = (steps + 2.0 * colour[..., None, :] * total[..., degrees : 2 * degrees, :]) / number
+    chosen = np.where(counted, np.argmin(score, axis=-2), 0)
     estimate, spread = pick(accelerations, chosen), pick(stated, chosen)
     apart = np.abs(estimate - accelerations[0]) > GAMMA * np.hypot(spread, stated[0])
     chosen = np.where(apart, 0, chosen)
-    least = np.take_along_axis(mean, chosen[..., None, :], axis=-2)[..., 0, :]
-    return chosen, np.where(counted, np.maximum(least - 0.5 * mean[..., 0, :], 0.0), 0.0)
+    least = np.take_along_axis(score, chosen[..., None, :], axis=-2)[..., 0, :]
+    mean_reference = total[..., degrees, :] / number[..., 0, :]
+    error = np.where(counted, np.maximum(least - colour * mean_reference, 0.0), 0.0)
+    estimate, own, spread = pick(accelerations, chosen), pick(noise, chosen), pick(stated, chosen)
+    coloured, expected = colour * own * own, colour * np.square(pick(between, chosen))
+    beyond_own = np.maximum(spread * spread - own * own - expected, 0.0)
+    beyond_reference = np.maximum(np.square(estimate - accelerations[0]) - colour * np.square(noise[0]), 0.0)
+    return chosen, stated_with(coloured + beyond_own + beyond_reference, error)
 
 
-def choose(stamps_ns: np.ndarray, accelerations: np.ndarray, stated: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The degree index chosen at each estimate (M, n), from every degree's accelerations and stated
-    deviations (D, M, n) at the estimates' stamps (M,), integer ns, increasing (NaN where a joint
-    has no estimate: it does not count); and the chosen degree's mean squared error over the last
-    second (M, n) (:func:`_least`)."""
-    score, counted = terms(accelerations, stated)
-    total, count = window_sums(stamps_ns, score.transpose(1, 0, 2), counted.transpose(1, 0, 2), round(MEMORY * NS))
-    return _least(total, count, accelerations, stated)
+def stated_with(variance: np.ndarray, error: np.ndarray) -> np.ndarray:
+    """The standard deviation stated with a chosen estimate: the root of its own ``variance`` (its
+    coloured noise and the biases read beside it) or, where larger, of its mean squared error over the
+    last second as the scores tell it (``error``). Where an acceleration jumps (a trapezoidal move's
+    corners) or the noise is coloured (a real arm's), the scores see what one estimate's terms miss."""
+    return np.sqrt(np.maximum(variance, error))
 
 
-def chosen_std(accelerations: np.ndarray, stated: np.ndarray, chosen: np.ndarray, error: np.ndarray) -> np.ndarray:
-    """The standard deviation stated with the chosen degree's estimate (...): its own and its distance
-    to the reference's beyond the reference's own deviation (an estimate of its bias over the
-    reference's: (a - r)^2 - s_r^2) in quadrature, or where larger the root of its mean squared error
-    over the last second as the scores tell it (``error``, from :func:`choose`). Where an acceleration
-    jumps (a trapezoidal move's corners) every degree's estimate is off by more than its own
-    deviation, the lower degrees' by more (RMS of error / sigma 3.0-3.1 for degree 4 on trapezoids at
-    250 Hz with its own alone, 1.6-2.0 for degree 6); where the noise is coloured (a real arm's) the
-    scores see what each estimate's own deviation misses."""
-    estimate, spread = pick(accelerations, chosen), pick(stated, chosen)
-    beyond = np.square(estimate - accelerations[0]) - np.square(stated[0])
-    return np.sqrt(np.maximum(spread * spread + np.maximum(beyond, 0.0), error))
+def choose(
+    stamps_ns: np.ndarray, accelerations: np.ndarray, stated: np.ndarray, noise: np.ndarray, between: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The degree index chosen at each estimate (M, n) and the standard deviation stated with it
+    (M, n), from every degree's accelerations, stated deviations, noise's deviations and those between
+    each and its neighbouring window (D, M, n) at the estimates' stamps (M,), integer ns, increasing
+    (NaN where a joint has no estimate: it does not count) (:func:`_least`)."""
+    rows, counted = terms(accelerations, stated, noise, between)
+    total, count = window_sums(stamps_ns, rows.transpose(1, 0, 2), counted.transpose(1, 0, 2), round(MEMORY * NS))
+    return _least(total, count, accelerations, stated, noise, between)
 
 
 def pick(options: np.ndarray, chosen: np.ndarray) -> np.ndarray:
@@ -115,16 +162,18 @@ def pick(options: np.ndarray, chosen: np.ndarray) -> np.ndarray:
 
 
 class DegreePool:
-    """:func:`choose` and :func:`chosen_std` one estimate at a time, in stamp order: the node's. An
+    """:func:`choose` one estimate at a time, in stamp order: the node's. An
     estimate's joints are chosen group by group (:meth:`choose`), after :meth:`start` at its stamp. The
     last second's score terms are kept and summed directly at each choice (in C once compiled,
     :func:`~.native_fit.choose_last`; the whole recording's sliding sums agree to about 1e-12)."""
 
     def __init__(self, joints: int) -> None:
-        # the last second's estimates: each degree's score terms, then whether counted
-        self._rows = StampedRows(round(MEMORY * NS), (len(DEGREES) + 1, joints))
+        # the last second's estimates: their terms (terms), then whether counted
+        self._rows = StampedRows(round(MEMORY * NS), (2 * len(DEGREES) + 3, joints))
         self._accelerations = np.zeros((len(DEGREES), joints))  # the estimate begun's
         self._stated = np.zeros((len(DEGREES), joints))
+        self._noise = np.zeros((len(DEGREES), joints))
+        self._between = np.zeros((len(DEGREES), joints))
         self._counted = np.zeros(joints, dtype=np.uint8)
 
     def clear(self) -> None:
@@ -142,22 +191,36 @@ class DegreePool:
         self._counted[:] = 0
 
     def choose(
-        self, joints: np.ndarray, accelerations: np.ndarray, stated: np.ndarray
+        self,
+        joints: np.ndarray,
+        accelerations: np.ndarray,
+        stated: np.ndarray,
+        noise: np.ndarray,
+        between: np.ndarray,
     ) -> tuple[np.ndarray, np.ndarray]:
         """The degree index (m,) for the ``joints`` (m,) of the estimate begun, from their degrees'
-        accelerations and stated deviations (D, m), which are kept for the estimates to come; and the
-        standard deviation to state with the chosen degree's estimate (m,) (:func:`chosen_std`)."""
+        accelerations, stated deviations, noise's deviations and those between each and its neighbouring
+        window (D, m), which are kept for the estimates to come; and the standard deviation to state
+        with the chosen degree's estimate (m,) (:func:`_least`)."""
         self._accelerations[:, joints], self._stated[:, joints] = accelerations, stated
+        self._noise[:, joints], self._between[:, joints] = noise, between
         self._counted[joints] = 1
         window = self._rows.window
         library = native_fit.FIT.get()
         if library is not None:
             chosen, std = native_fit.choose_last(
-                library, window, self._accelerations, self._stated, self._counted, LEAST, GAMMA
+                library,
+                window,
+                self._accelerations,
+                self._stated,
+                self._noise,
+                self._between,
+                self._counted,
+                LEAST,
+                GAMMA,
             )
             return chosen[joints], std[joints]
-        score, counted = terms(accelerations, stated)
-        window[-1, :-1, joints], window[-1, -1, joints] = score.T, counted[0]
+        rows, counted = terms(accelerations, stated, noise, between)
+        window[-1, :-1, joints], window[-1, -1, joints] = rows.T, counted[0]
         total = np.add.reduce(window[:, :, joints], axis=0)
-        chosen, error = _least(total[:-1], total[-1:], accelerations, stated)
-        return chosen, chosen_std(accelerations, stated, chosen, error)
+        return _least(total[:-1], total[-1:], accelerations, stated, noise, between)

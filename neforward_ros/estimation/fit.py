@@ -21,7 +21,7 @@ degree's noise grows fastest where they extrapolate, at the newest sample)."""
 ADAPTIVE_ORDER = 6
 """Degree of the adaptive fit's polynomials where the windows reach past the estimate (fixed lag, whole
 recordings): the reference of the default's degree choice (:mod:`~neforward_ros.estimation.degree_choice`,
-among 6, 4 and 2; the support is :data:`DEFAULT_ORDER`'s), and, fused with :data:`DEFAULT_ORDER`'s
+among 6, 4 and 3; the support is :data:`DEFAULT_ORDER`'s), and, fused with :data:`DEFAULT_ORDER`'s
 (:func:`~neforward_ros.estimation.adaptive.fused`), the centred fit the causal setting is scored against:
 the intersection-of-confidence-intervals rule shrinks a window whose bias shows, and degree 6 lets it
 keep windows about twice as wide on fast motions as degree 4 does for the same bias, while slow, noisy

@@ -248,10 +248,13 @@ static int level_fit(const double *sums, const double *moments, long n, long ord
     return level_fits(sums, moments, n, 1, &order, &wanted, &fit, h, h0, derivative) >= order + 1;
 }
 
-/* The ICI rule over the `valid` levels' fits (valid, n, 5) of one degree, into out (5, n): value,
-   first and second derivative, stated standard deviation (see stated_std in adaptive.py), strained;
-   and into noise (n,) the chosen level's noise's standard deviation. changes (levels, n): how many
-   times each column's samples change within each level's window. */
+/* The ICI rule over the `valid` levels' fits (valid, n, 5) of one degree, into out (7, n): value,
+   first and second derivative, stated standard deviation (see stated_std in adaptive.py), strained,
+   the chosen level's noise's standard deviation (also into noise (n,)), and the deviation that noise
+   alone puts between its estimate and the other level's that the stated one measures the distance to
+   (the root of the difference of their variances; 0 where there is none: see between_std in
+   adaptive.py). changes (levels, n): how many times each column's samples change within each level's
+   window. */
 static void choose(double *fits, long valid, long n, const long *lo, const long *hi, const double *changes,
                    const long *derivative, const double *white, const double *step, const double *spread,
                    double gamma, double roughness, double floor_, double *out, double *noise) {
@@ -281,6 +284,7 @@ static void choose(double *fits, long valid, long n, const long *lo, const long 
         int strained = (chosen == smallest_level && smallest_level > 0) || white[j] > roughness * spread[j];
         for (long k = 0; k < 4; k++) out[k * n + j] = fit[k];
         noise[j] = fit[3];
+        out[6 * n + j] = 0.0;
         /* the distance to the next smaller window's estimate, in quadrature; where the smallest was
            chosen, to the next larger one's */
         long other = chosen + 1 < valid ? chosen + 1 : chosen - 1;
@@ -289,8 +293,10 @@ static void choose(double *fits, long valid, long n, const long *lo, const long 
             long k = derivative[j] == 2 ? 2 : 1;
             double apart = fit[k] - neighbour[k];
             out[3 * n + j] = sqrt(fit[3] * fit[3] + apart * apart);
+            out[6 * n + j] = sqrt(fabs(neighbour[3] * neighbour[3] - fit[3] * fit[3]));
         }
         out[4 * n + j] = strained ? 1.0 : 0.0;
+        out[5 * n + j] = noise[j];
     }
 }
 
@@ -406,13 +412,13 @@ static int fit_target(long count, const double *times, const double *values, lon
         if (valid_also[a] > rings) rings = valid_also[a];
         also_at[a + 1] = also_at[a] + valid_also[a];
     }
-    double *scratch = malloc(sizeof(double) * (d * n + 5 * (size_t)(valid + valid_low + 1) * n + 6 * n
+    double *scratch = malloc(sizeof(double) * (d * n + 5 * (size_t)(valid + valid_low) * n + 7 * n + 6 * n
                                                + (size_t)rings * n + 2 * (size_t)n + (size_t)width * n
                                                + 5 * (size_t)also_at[nalso] * n + (size_t)n));
     if (scratch == NULL) return 2;
     double *moments = scratch, *fits = moments + d * n, *fits_low = fits + 5 * (size_t)valid * n;
     double *out_low = fits_low + 5 * (size_t)valid_low * n;
-    double *white = out_low + 5 * (size_t)n, *step = white + n, *spread = step + n;
+    double *white = out_low + 7 * (size_t)n, *step = white + n, *spread = step + n;
     double *changes = spread + 4 * n;  /* after previous, candidate, alive: (rings, n) */
     double *noise = changes + (size_t)rings * n, *noise_low = noise + n, *changed = noise_low + n;
     double *fits_also = changed + (size_t)width * n;  /* each further degree's level fits, one after another */
@@ -552,12 +558,12 @@ static int fit_target(long count, const double *times, const double *values, lon
                 double apart = fabs(out_low[k * n + j] - out[k * n + j]);
                 double std_low = noise_low[j], std_high = noise[j];
                 if (apart <= gamma * hypot(std_low, std_high) && std_low <= std_high)
-                    for (long q = 0; q < 5; q++) out[q * n + j] = out_low[q * n + j];
+                    for (long q = 0; q < 7; q++) out[q * n + j] = out_low[q * n + j];
             }
         }
         for (long a = 0; a < nalso; a++)  /* each further degree's own choice, not fused */
             choose(fits_also + also_at[a] * n * 5, valid_also[a], n, lo, hi, changes, derivative, white, step, spread,
-                   gamma, roughness, floor_, out + (a + 1) * 5 * n, noise_low);
+                   gamma, roughness, floor_, out + (a + 1) * 7 * n, noise_low);
     }
     free(scratch);
     return status;
@@ -566,8 +572,10 @@ static int fit_target(long count, const double *times, const double *values, lon
 /* See adaptive_fit in neforward_ros/estimation/adaptive.py. times (count,), values (count, n)
    row-major; levels, leads (nlevels,) the half-widths (largest first) and their leads; order the
    polynomial degree and lower a second, lower degree fused with it (see fused in adaptive.py; 0: none),
-   both fitted from the same power sums and noise reading; derivative (n,) 2 or 1. out (5, n): value,
-   first and second derivative, the chosen derivative's standard deviation, strained (1 or 0). Returns
+   both fitted from the same power sums and noise reading; derivative (n,) 2 or 1. out (1 + nalso, 7, n),
+   for order and then each degree of also: value, first and second derivative, the chosen derivative's
+   stated standard deviation, strained (1 or 0), its noise's standard deviation and the deviation that
+   noise puts between it and the level the stated one is measured against (see choose). Returns
    0 when done, 1 when the largest window is too small (the caller's function serves), 2 when memory
    runs out. */
 int adaptive_fit(long count, const double *times, const double *values, long n, double target,
@@ -579,7 +587,7 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
 }
 
 /* adaptive_fit at each of ntargets targets over the whole of times, values; derivative (n,); out
-   (ntargets, 5, n); status (ntargets,) each target's return value. Neighbouring targets' windows
+   (ntargets, 1 + nalso, 7, n); status (ntargets,) each target's return value. Neighbouring targets' windows
    overlap: a block of them takes its sixth differences from one pass (sixths), which is most of
    each target's work otherwise; the numbers are the same as adaptive_fit's one target at a time. */
 void adaptive_fits(long count, const double *times, const double *values, long n, long ntargets,
@@ -607,7 +615,7 @@ void adaptive_fits(long count, const double *times, const double *values, long n
         for (long m = first; m < last; m++)
             status[m] = fit_target(count, times, values, n, targets[m], nlevels, levels, leads, order, lower,
                                    nalso, also, derivative, gamma, roughness, sixth_gain, floor_, growth, lattice,
-                                   pre, lo, hi - lo, pre == NULL ? 0 : strides, out + m * (1 + nalso) * 5 * n);
+                                   pre, lo, hi - lo, pre == NULL ? 0 : strides, out + m * (1 + nalso) * 7 * n);
         free(pre);
     }
 }
@@ -672,112 +680,129 @@ void causal_candidates(long count, const double *times, const double *values, lo
     free(fit);
 }
 
-/* One estimate's terms of each degree's score (a_g - a_0)^2 + 2 s_g^2 into score (ndeg), and 1 into
-   score[ndeg] where it counts (counted, and every degree's estimate and deviation finite), else 0
-   throughout. a, s: degree g's acceleration and stated deviation at a[g * acc_g], s[g * std_g]. */
-static void degree_scores(long ndeg, const double *a, long acc_g, const double *s, long std_g, int counted,
-                          double *score) {
+/* One estimate's terms of the degree choice's sums into score (2 ndeg + 3): (a_g - a_(g-1))^2 at [g] (0 at [0]),
+   v_g^2 at [ndeg + g], the reference's squared distance to its neighbouring window, s_0^2 - v_0^2 (at
+   least 0), at [2 ndeg] and what its noise alone puts there, w_0^2, at [2 ndeg + 1]; and 1 at
+   [2 ndeg + 2] where it counts (counted, and every degree's estimate and deviations finite), else 0
+   throughout. a, s, v, w: degree g's acceleration, stated deviation, noise's deviation and the noise's
+   deviation between it and its neighbour at a[g * acc_g], s[g * std_g], v[g * noise_g], w[g * between_g]
+   (see degree_choice.terms). */
+static void degree_scores(long ndeg, const double *a, long acc_g, const double *s, long std_g, const double *v,
+                          long noise_g, const double *w, long between_g, int counted, double *score) {
     int finite = counted;
-    for (long g = 0; g < ndeg && finite; g++) finite = isfinite(a[g * acc_g]) && isfinite(s[g * std_g]);
+    for (long g = 0; g < ndeg && finite; g++)
+        finite = isfinite(a[g * acc_g]) && isfinite(s[g * std_g]) && isfinite(v[g * noise_g])
+                 && isfinite(w[g * between_g]);
     for (long g = 0; g < ndeg; g++) {
-        double apart = a[g * acc_g] - a[0], spread = s[g * std_g];
-        score[g] = finite ? apart * apart + 2.0 * spread * spread : 0.0;
+        double apart = g > 0 ? a[g * acc_g] - a[(g - 1) * acc_g] : 0.0, noise = v[g * noise_g];
+        score[g] = finite ? apart * apart : 0.0;
+        score[ndeg + g] = finite ? noise * noise : 0.0;
     }
-    score[ndeg] = finite ? 1.0 : 0.0;
+    score[2 * ndeg] = finite ? nmax(s[0] * s[0] - v[0] * v[0], 0.0) : 0.0;
+    score[2 * ndeg + 1] = finite ? w[0] * w[0] : 0.0;
+    score[2 * ndeg + 2] = finite ? 1.0 : 0.0;
 }
 
-/* One estimate's degree (degree_choice._least) and the deviation stated with it (chosen_std), from its
-   window's score sums total[g * n] and count of estimates counted: the least mean score, unless fewer
-   than `least` counted or (where this estimate counts) it leaves the reference's by more than gamma of
-   their combined deviations. */
+/* One estimate's degree and the deviation stated with it (degree_choice._least), from its window's sums
+   total[k * n] of degree_scores' terms k and count of estimates counted. */
 static void decide(long ndeg, long n, const double *total, double count, const double *a, long acc_g,
-                   const double *s, long std_g, int counted, long least, double gamma, long *chosen,
-                   double *stated) {
-    double number = count > 1.0 ? count : 1.0;
+                   const double *s, long std_g, const double *v, long noise_g, const double *w, long between_g,
+                   int counted, long least, double gamma, long *chosen, double *stated) {
+    double number = count > 1.0 ? count : 1.0, expected = total[(2 * ndeg + 1) * n];
+    double colour = expected > 0.0 ? nmax(total[2 * ndeg * n] / expected, 1.0) : 1.0;
     int enough = count >= (double)least;
     long best = 0;
-    if (enough)
-        for (long g = 1; g < ndeg; g++)
-            if (total[g * n] / number < total[best * n] / number) best = g;
-    double apart = a[best * acc_g] - a[0], spread = s[best * std_g];
-    if (counted && fabs(apart) > gamma * sqrt(spread * spread + s[0] * s[0])) {
-        best = 0;
-        apart = 0.0;
-        spread = s[0];
+    double best_score = 0.0, steps = 0.0;
+    for (long g = 0; g < ndeg; g++) {
+        steps += total[g * n];  /* the squared steps from the reference down to degree g */
+        double score = (steps + 2.0 * colour * total[(ndeg + g) * n]) / number;
+        if (g == 0 || (enough && score < best_score)) { best = g; best_score = score; }
     }
-    double error = enough ? nmax(total[best * n] / number - 0.5 * (total[0] / number), 0.0) : 0.0;
-    double beyond = apart * apart - s[0] * s[0];
+    if (counted && fabs(a[best * acc_g] - a[0]) > gamma * hypot(s[best * std_g], s[0])) {
+        best = 0;
+        best_score = 2.0 * colour * total[ndeg * n] / number;
+    }
+    double error = enough ? nmax(best_score - colour * total[ndeg * n] / number, 0.0) : 0.0;
+    double noise = v[best * noise_g], own = s[best * std_g], apart = a[best * acc_g] - a[0];
+    double between = w[best * between_g];
+    double beside = nmax(own * own - noise * noise - colour * between * between, 0.0);
+    double beyond = nmax(apart * apart - colour * v[0] * v[0], 0.0);
     *chosen = best;
-    *stated = sqrt(nmax(spread * spread + nmax(beyond, 0.0), error));
+    *stated = sqrt(nmax(colour * noise * noise + beside + beyond, error));
 }
 
-/* degree_choice.choose and chosen_std over m estimates in stamp order (stamps, ns): per joint, each
-   degree's mean score over the estimates stamped in (s - span, s] that count, as sliding sums; where a
-   sum has taken in more than `precision` times itself since it was last added up (or `refresh`
-   estimates have passed), added up afresh over its window, so that it stays within about 1e-14 of
-   the direct sums the node adds (choose_last). acc, std: degree g's acceleration and stated deviation
-   of estimate t, joint j at [g * _g + t * _t + j]; counted (m, n). Into chosen (m, n) the degree index
-   and into stated (m, n) the standard deviation stated with it. */
+/* degree_choice.choose over m estimates in stamp order (stamps, ns): per joint, degree_scores' terms
+   over the estimates stamped in (s - span, s] that count, as sliding sums; where a sum has taken in more
+   than `precision` times itself since it was last added up (or `refresh` estimates have passed), added
+   up afresh over its window, so that it stays within about 1e-14 of the direct sums the node adds
+   (choose_last). acc, std, noise, between: degree g's acceleration, stated deviation, noise's deviation
+   and the noise's deviation between it and its neighbour (degree_scores) of estimate t, joint j at
+   [g * _g + t * _t + j]; counted (m, n). Into chosen (m, n) the degree index and into stated (m, n) the
+   standard deviation stated with it. */
 void choose_degrees(long m, long ndeg, long n, const long long *stamps, long long span, const double *acc,
-                    long acc_g, long acc_t, const double *std, long std_g, long std_t,
+                    long acc_g, long acc_t, const double *std, long std_g, long std_t, const double *noise,
+                    long noise_g, long noise_t, const double *between, long between_g, long between_t,
                     const unsigned char *counted, long least, double gamma, double precision, long refresh,
                     long *chosen, double *stated) {
-    long row = ndeg + 1;  /* each estimate's scores (m, n, ndeg + 1), whether it counts last */
-    double *scores = malloc(sizeof(double) * ((size_t)m * n * row + (size_t)(2 * ndeg + 1) * n));
+    long sums = 2 * ndeg + 2, row = sums + 1;  /* each estimate's terms (m, n, row), whether it counts last */
+    double *scores = malloc(sizeof(double) * ((size_t)m * n * row + (size_t)(2 * sums + 1) * n));
     if (scores == NULL) {
         for (long k = 0; k < m * n; k++) { chosen[k] = 0; stated[k] = NAN; }
         return;
     }
-    double *total = scores + (size_t)m * n * row, *passed = total + ndeg * n, *count = passed + ndeg * n;
-    for (long k = 0; k < (2 * ndeg + 1) * n; k++) total[k] = 0.0;
+    double *total = scores + (size_t)m * n * row, *passed = total + sums * n, *count = passed + sums * n;
+    for (long k = 0; k < (2 * sums + 1) * n; k++) total[k] = 0.0;
     for (long t = 0; t < m; t++)
         for (long j = 0; j < n; j++)
-            degree_scores(ndeg, acc + t * acc_t + j, acc_g, std + t * std_t + j, std_g, counted[t * n + j],
+            degree_scores(ndeg, acc + t * acc_t + j, acc_g, std + t * std_t + j, std_g, noise + t * noise_t + j,
+                          noise_g, between + t * between_t + j, between_g, counted[t * n + j],
                           scores + (t * n + j) * row);
     long first = 0, since = 0;
     for (long t = 0; t < m; t++) {
         for (long j = 0; j < n; j++) {  /* this estimate joins its window */
             const double *score = scores + (t * n + j) * row;
-            count[j] += score[ndeg];
-            for (long g = 0; g < ndeg; g++) { total[g * n + j] += score[g]; passed[g * n + j] += score[g]; }
+            count[j] += score[sums];
+            for (long g = 0; g < sums; g++) { total[g * n + j] += score[g]; passed[g * n + j] += score[g]; }
         }
         for (; stamps[first] <= stamps[t] - span; first++)  /* the estimates a second old leave it */
             for (long j = 0; j < n; j++) {
                 const double *score = scores + (first * n + j) * row;
-                count[j] -= score[ndeg];
-                for (long g = 0; g < ndeg; g++) total[g * n + j] -= score[g];
+                count[j] -= score[sums];
+                for (long g = 0; g < sums; g++) total[g * n + j] -= score[g];
             }
         int all = ++since >= refresh;
         if (all) since = 0;
         for (long j = 0; j < n; j++) {
             int loose = all;
-            for (long g = 0; g < ndeg; g++) loose |= passed[g * n + j] > precision * total[g * n + j];
+            for (long g = 0; g < sums; g++) loose |= passed[g * n + j] > precision * total[g * n + j];
             if (!loose) continue;
-            for (long g = 0; g < ndeg; g++) total[g * n + j] = 0.0;
+            for (long g = 0; g < sums; g++) total[g * n + j] = 0.0;
             for (long i = first; i <= t; i++)
-                for (long g = 0; g < ndeg; g++) total[g * n + j] += scores[(i * n + j) * row + g];
-            for (long g = 0; g < ndeg; g++) passed[g * n + j] = total[g * n + j];
+                for (long g = 0; g < sums; g++) total[g * n + j] += scores[(i * n + j) * row + g];
+            for (long g = 0; g < sums; g++) passed[g * n + j] = total[g * n + j];
         }
         for (long j = 0; j < n; j++)
             decide(ndeg, n, total + j, count[j], acc + t * acc_t + j, acc_g, std + t * std_t + j, std_g,
-                   counted[t * n + j], least, gamma, chosen + t * n + j, stated + t * n + j);
+                   noise + t * noise_t + j, noise_g, between + t * between_t + j, between_g, counted[t * n + j],
+                   least, gamma, chosen + t * n + j, stated + t * n + j);
     }
     free(scores);
 }
 
 /* The node's choice (degree_choice.DegreePool): the last of m estimates' degrees and deviations (n).
-   scores (m, ndeg + 1, n): each estimate's score terms and whether it counts (degree_scores' row,
-   joint by joint); the last's are made here from acc, std (ndeg, n) and counted (n). Their sums over
-   all m (the window) are added up directly, estimate by estimate. */
+   scores (m, 2 ndeg + 3, n): each estimate's terms and whether it counts (degree_scores' row, joint by
+   joint); the last's are made here from acc, std, noise, between (ndeg, n) and counted (n). Their sums
+   over all m (the window) are added up directly, estimate by estimate. */
 void choose_last(long m, long ndeg, long n, double *scores, const double *acc, const double *std,
-                 const unsigned char *counted, long least, double gamma, long *chosen, double *stated) {
-    long row = (ndeg + 1) * n;
-    double total[(3 + MAX_ALSO) * n], score[3 + MAX_ALSO];
+                 const double *noise, const double *between, const unsigned char *counted, long least,
+                 double gamma, long *chosen, double *stated) {
+    long width = 2 * ndeg + 3, row = width * n;
+    double total[(7 + 2 * MAX_ALSO) * n], score[7 + 2 * MAX_ALSO];
     if (ndeg > 2 + MAX_ALSO || m < 1) return;
     double *last = scores + (m - 1) * row;
     for (long j = 0; j < n; j++) {
-        degree_scores(ndeg, acc + j, n, std + j, n, counted[j], score);
-        for (long g = 0; g <= ndeg; g++) last[g * n + j] = score[g];
+        degree_scores(ndeg, acc + j, n, std + j, n, noise + j, n, between + j, n, counted[j], score);
+        for (long g = 0; g < width; g++) last[g * n + j] = score[g];
     }
     for (long k = 0; k < row; k++) total[k] = 0.0;
     for (long t = 0; t < m; t++) {
@@ -785,8 +810,8 @@ void choose_last(long m, long ndeg, long n, double *scores, const double *acc, c
         for (long k = 0; k < row; k++) total[k] += each[k];
     }
     for (long j = 0; j < n; j++)
-        decide(ndeg, n, total + j, total[ndeg * n + j], acc + j, n, std + j, n, counted[j], least, gamma,
-               chosen + j, stated + j);
+        decide(ndeg, n, total + j, total[(width - 1) * n + j], acc + j, n, std + j, n, noise + j, n, between + j,
+               n, counted[j], least, gamma, chosen + j, stated + j);
 }
 """
 
@@ -863,10 +888,11 @@ def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
                                           long, pointer, pointer, pointer]  # fmt: skip
     library.causal_candidates.restype = None
     library.choose_degrees.argtypes = [long, long, long, pointer, ctypes.c_longlong, pointer, long, long, pointer,
-                                       long, long, pointer, long, double, double, long, pointer, pointer]  # fmt: skip
+                                       long, long, pointer, long, long, pointer, long, long, pointer, long, double,
+                                       double, long, pointer, pointer]  # fmt: skip
     library.choose_degrees.restype = None
-    library.choose_last.argtypes = [long, long, long, pointer, pointer, pointer, pointer, long, double, pointer,
-                                    pointer]  # fmt: skip
+    library.choose_last.argtypes = [long, long, long, pointer, pointer, pointer, pointer, pointer, pointer, long,
+                                    double, pointer, pointer]  # fmt: skip
     library.choose_last.restype = None
     native_kalman.declare(library)
     return library
@@ -894,16 +920,18 @@ def fit(
     lower: int | None = None,
     also: tuple[int, ...] = (),
 ) -> tuple[np.ndarray, ...] | None:
-    """The C function's value, first and second derivative, standard deviation and strain (D, n) each,
-    for ``order`` and then each degree of ``also`` (D = 1 + len(also)); None where the Python function
-    must serve (too few samples, an order above MAX_ORDER). ``lower``: a second degree fused with ``order``
-    (:func:`neforward_ros.estimation.adaptive.fused`), in the same call; ``also``: as for :func:`fits`."""
+    """The C function's value, first and second derivative, stated standard deviation, strain, the
+    noise's standard deviation and the deviation the noise puts between the estimate and the level its
+    stated deviation is measured against (D, n) each, for ``order`` and then each degree of ``also`` (D =
+    1 + len(also)); None where the Python function must serve (too few samples, an order above MAX_ORDER).
+    ``lower``: a second degree fused with ``order`` (:func:`neforward_ros.estimation.adaptive.fused`), in
+    the same call; ``also``: as for :func:`fits`."""
     got = fits(library, times, values, np.array([target], dtype=float), half_widths, leads, order, derivative,
                gamma, roughness, sixth_gain, floor, growth, lattice, lower, also)  # fmt: skip
     if got is None or not got[1][0]:
         return None
     out = got[0][0]
-    return out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4] > 0.5
+    return out[:, 0], out[:, 1], out[:, 2], out[:, 3], out[:, 4] > 0.5, out[:, 5], out[:, 6]
 
 
 def fits(
@@ -925,7 +953,9 @@ def fits(
     also: tuple[int, ...] = (),
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The C function at every target over the whole of ``times, values``: value, first and second
-    derivative, standard deviation and strain (M, 1 + len(also), 5, n) for ``order`` and each further
+    derivative, stated standard deviation, strain, the noise's standard deviation and the deviation it
+    puts between the estimate and the level the stated one is measured against (M, 1 + len(also), 7, n)
+    for ``order`` and each further
     degree of ``also`` (each below ``order``, with its own windows chosen: the numbers of a call at that
     degree alone), and whether each target was done (M,) (where not, the Python function must serve);
     None above MAX_ORDER. ``lower``: as for :func:`fit`."""
@@ -938,7 +968,7 @@ def fits(
     values = np.ascontiguousarray(values, dtype=float)
     targets = np.ascontiguousarray(targets, dtype=float)
     n = values.shape[1]
-    out = np.empty((len(targets), 1 + len(also), 5, n))
+    out = np.empty((len(targets), 1 + len(also), 7, n))
     status = np.empty(len(targets), dtype=np.intc)
     half_widths = np.ascontiguousarray(half_widths, dtype=float)
     leads = np.ascontiguousarray(leads, dtype=float)
@@ -1009,16 +1039,19 @@ def choose_degrees(
     span_ns: int,
     accelerations: np.ndarray,
     stated: np.ndarray,
+    noise: np.ndarray,
+    between: np.ndarray,
     counted: np.ndarray,
     least: int,
     gamma: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The C function's :func:`neforward_ros.estimation.degree_choice.choose` and ``chosen_std``: the
-    degree index chosen at each estimate (M, n) and the standard deviation stated with it (M, n), from
-    every degree's accelerations and stated deviations (D, M, n) (any strides, a joint's entries
-    adjacent), which of them count (M, n), at the stamps (M,), integer ns, increasing."""
+    """The C function's :func:`neforward_ros.estimation.degree_choice.choose`: the degree index chosen
+    at each estimate (M, n) and the standard deviation stated with it (M, n), from every degree's
+    accelerations, stated deviations, noise's deviations and the noise's deviations between each and
+    its neighbouring window (D, M, n) (any strides, a joint's entries adjacent), which of them count
+    (M, n), at the stamps (M,), integer ns, increasing."""
     item = accelerations.itemsize
-    for array in (accelerations, stated):
+    for array in (accelerations, stated, noise, between):
         if array.dtype != np.float64 or array.strides[2] != item or any(x % item for x in array.strides):
             raise ValueError("choose_degrees takes float64 arrays whose joints are adjacent")
     stamps = np.ascontiguousarray(stamps_ns, dtype=np.int64)
@@ -1028,7 +1061,9 @@ def choose_degrees(
     out = np.empty((m, n))
     library.choose_degrees(m, degrees, n, stamps.ctypes.data, int(span_ns), accelerations.ctypes.data,
                            accelerations.strides[0] // item, accelerations.strides[1] // item, stated.ctypes.data,
-                           stated.strides[0] // item, stated.strides[1] // item, mask.ctypes.data, least, gamma,
+                           stated.strides[0] // item, stated.strides[1] // item, noise.ctypes.data,
+                           noise.strides[0] // item, noise.strides[1] // item, between.ctypes.data,
+                           between.strides[0] // item, between.strides[1] // item, mask.ctypes.data, least, gamma,
                            CHOICE_PRECISION, CHOICE_REFRESH, chosen.ctypes.data, out.ctypes.data)  # fmt: skip
     return chosen, out
 
@@ -1038,22 +1073,28 @@ def choose_last(
     scores: np.ndarray,
     accelerations: np.ndarray,
     stated: np.ndarray,
+    noise: np.ndarray,
+    between: np.ndarray,
     counted: np.ndarray,
     least: int,
     gamma: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The C function's choice for the node (:class:`neforward_ros.estimation.degree_choice.DegreePool`):
     the last estimate's degree index (n,) and the standard deviation stated with it (n,). ``scores``
-    (W, D + 1, n), contiguous: the window's estimates' score terms and whether each counts (the last
-    row is written here, from the last estimate's accelerations and stated deviations (D, n) and which
-    count (n,), uint8); their sums added up directly."""
-    rows, degrees, n = scores.shape[0], scores.shape[1] - 1, scores.shape[2]
+    (W, 2 D + 3, n), contiguous: the window's estimates' terms (:func:`~.degree_choice.terms`) and
+    whether each counts (the last row is written here, from the last estimate's accelerations, stated
+    deviations, noise's deviations and those between each and its neighbour (D, n) and which count
+    (n,), uint8); their sums added up directly."""
+    rows, degrees, n = scores.shape[0], (scores.shape[1] - 3) // 2, scores.shape[2]
     accelerations = np.ascontiguousarray(accelerations, dtype=float)
     stated = np.ascontiguousarray(stated, dtype=float)
+    noise = np.ascontiguousarray(noise, dtype=float)
+    between = np.ascontiguousarray(between, dtype=float)
     chosen = np.zeros(n, dtype=C_LONG)
     out = np.full(n, np.nan)  # an empty window (none begun) states nothing
     library.choose_last(rows, degrees, n, scores.ctypes.data, accelerations.ctypes.data, stated.ctypes.data,
-                        counted.ctypes.data, least, gamma, chosen.ctypes.data, out.ctypes.data)  # fmt: skip
+                        noise.ctypes.data, between.ctypes.data, counted.ctypes.data, least, gamma,
+                        chosen.ctypes.data, out.ctypes.data)  # fmt: skip
     return chosen, out
 
 

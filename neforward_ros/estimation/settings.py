@@ -31,7 +31,7 @@ class StreamSettings:
             on the motion model of ``kalman``) or ``"difference"`` (numpy.gradient twice; a baseline).
         window: polyfit: full width of the local fit, s. kalman: the stretch of recent samples an
             estimate needs before its stamp (its warm-up), s.
-        order: polynomial degree (polyfit); None: :attr:`degree`'s default, 6, 4 or 2 chosen per joint for adaptive
+        order: polynomial degree (polyfit); None: :attr:`degree`'s default, 6, 4 or 3 chosen per joint for adaptive
             windows reaching past the estimate (a fixed lag), 4 for a fixed window; an adaptive causal
             fit chooses among degrees 2-5 (:mod:`.causal_choice`).
         adaptive: polyfit: each joint's window chosen per estimate, up to ``window``, by the
@@ -112,7 +112,7 @@ class StreamSettings:
             size = (
                 f"windows up to {self.window:g} s, chosen per joint" if self.adaptive else f"window {self.window:g} s"
             )
-            degree = "degrees 6, 4 or 2, chosen per joint" if self.lower_degree else f"degree {self.degree}"
+            degree = "degrees 6, 4 or 3, chosen per joint" if self.lower_degree else f"degree {self.degree}"
             what = f"polyfit ({size}, {degree})"
             if self.adaptive and self.order is None and self.effective_lag == 0.0:
                 what = (

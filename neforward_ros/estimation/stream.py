@@ -602,8 +602,8 @@ class StreamingEstimator:
         elif self._degrees is not None:  # each degree's rule; the degree chosen per joint by the recent estimates
             fits = degree_fit(times, values, target_s, half, degree_choice.DEGREES, lead, derivative)
             options = _per_joint(fits, m, by_velocity, exact)  # each (D, m)
-            chosen, std = self._degrees.choose(np.asarray(group.joints), options[2], options[3])
-            got = np.stack(options)[:, chosen, np.arange(m)]  # each entry at each joint's chosen degree
+            chosen, std = self._degrees.choose(np.asarray(group.joints), options[2], options[3], *options[5:])
+            got = np.stack(options[:5])[:, chosen, np.arange(m)]  # each entry at each joint's chosen degree
             got = (*got[:3], std, got[4] > 0.5)
         else:
             fit = adaptive_fit(times, values, target_s, half, settings.degree, lead, derivative, settings.lower_degree)
