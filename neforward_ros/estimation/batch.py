@@ -228,7 +228,8 @@ def _chosen_block(
     library = native_fit.FIT.get()
     if library is not None:
         chosen, std = native_fit.choose_degrees(library, stamps_ns, round(degree_choice.MEMORY * NS), options[2],
-                                                *options[3:], counted, degree_choice.LEAST, GAMMA)  # fmt: skip
+                                                *options[3:], counted, degree_choice.LEAST, GAMMA,
+                                                degree_choice.STRAIN)  # fmt: skip
     else:
         chosen, std = degree_choice.choose(stamps_ns, *(np.where(counted, option, np.nan) for option in options[2:]))
     q_at, qd_at, qdd_at = (degree_choice.pick(entries, chosen) for entries in options[:3])

@@ -36,6 +36,15 @@ c is read from the reference's same second: the sum of its squared distances to 
 window (s_r^2 - v_r^2) over the sum of what the noise read would put there (w_r^2, the difference of
 the two windows' noise variances: :func:`~.adaptive.between_std`), at least 1.
 
+The record tells each degree's usual error; one estimate can be far from usual. Where the chosen
+degree's stated deviation is over :data:`STRAIN` (G) times the root of its mean squared error over the
+second (its rule strained here: a window cut short on sparse or lopsided samples, after a gap, in a
+writer's bursts), each degree is scored with its own noise now for one of its two c v^2 (its usual
+bias from the record, its variance from this estimate). A 12-bit joint at 100 Hz after a 0.3 s gap
+read its noise off the few samples since (2.3x under the encoder's rounding), degree 4's rule cut its
+windows, and two estimates came out 4-5 rad/s^2 off (6.7x the steady 99th percentile); with the check,
+1.0x.
+
 The deviation stated with the chosen estimate is its coloured noise, c v_a^2, the distance to its
 next smaller window beyond what that noise puts there (a bias the rule let through, a trapezoid's
 corner), and its distance to the reference beyond the reference's coloured noise, added in
@@ -61,6 +70,10 @@ DEGREES = (6, 4, 3)
 """The degrees the default fit chooses among, the reference (the least biased) first."""
 MEMORY = 1.0
 """s: the estimates a choice is made on (stamps in (s - MEMORY, s])."""
+STRAIN = GAMMA
+"""How many times the chosen degree's mean squared error over the second (in deviations) an estimate's
+stated deviation may be before each degree is scored with its own noise now (see the module's
+docstring: the estimate's rule strained)."""
 LEAST = 20
 """Estimates a joint's record must hold before a degree other than the reference is chosen: after a
 start or a restart, the first few are a draw or two of the noise (on the reference signal at 500 Hz
@@ -116,8 +129,15 @@ def _least(
     beside, expected = total[..., 2 * degrees, :], total[..., 2 * degrees + 1, :]
     colour = np.where(expected > 0.0, np.maximum(beside / np.where(expected > 0.0, expected, 1.0), 1.0), 1.0)
     steps = np.cumsum(total[..., :degrees, :], axis=-2)  # from the reference down to each degree
-    score = (steps + 2.0 * colour[..., None, :] * total[..., degrees : 2 * degrees, :]) / number
+    usual = total[..., degrees : 2 * degrees, :] / number  # each degree's mean noise variance
+    score = steps / number + 2.0 * colour[..., None, :] * usual
     chosen = np.where(counted, np.argmin(score, axis=-2), 0)
+    # where this estimate's window was cut far below its usual, each degree's own variance now
+    now = np.moveaxis(np.square(np.asarray(noise, dtype=float)), 0, -2)
+    mean_error = np.take_along_axis(score, chosen[..., None, :], -2)[..., 0, :] - colour * usual[..., 0, :]
+    cut = counted & (pick(stated, chosen) ** 2 > STRAIN**2 * np.maximum(mean_error, 0.0))
+    mended = np.argmin(np.nan_to_num(steps / number + colour[..., None, :] * (usual + now), nan=np.inf), axis=-2)
+    chosen = np.where(cut, mended, chosen)
     estimate, spread = pick(accelerations, chosen), pick(stated, chosen)
     apart = np.abs(estimate - accelerations[0]) > GAMMA * np.hypot(spread, stated[0])
     chosen = np.where(apart, 0, chosen)
@@ -218,6 +238,7 @@ class DegreePool:
                 self._counted,
                 LEAST,
                 GAMMA,
+                STRAIN,
             )
             return chosen[joints], std[joints]
         rows, counted = terms(accelerations, stated, noise, between)

@@ -707,7 +707,7 @@ static void degree_scores(long ndeg, const double *a, long acc_g, const double *
    total[k * n] of degree_scores' terms k and count of estimates counted. */
 static void decide(long ndeg, long n, const double *total, double count, const double *a, long acc_g,
                    const double *s, long std_g, const double *v, long noise_g, const double *w, long between_g,
-                   int counted, long least, double gamma, long *chosen, double *stated) {
+                   int counted, long least, double gamma, double strain, long *chosen, double *stated) {
     double number = count > 1.0 ? count : 1.0, expected = total[(2 * ndeg + 1) * n];
     double colour = expected > 0.0 ? nmax(total[2 * ndeg * n] / expected, 1.0) : 1.0;
     int enough = count >= (double)least;
@@ -717,6 +717,22 @@ static void decide(long ndeg, long n, const double *total, double count, const d
         steps += total[g * n];  /* the squared steps from the reference down to degree g */
         double score = (steps + 2.0 * colour * total[(ndeg + g) * n]) / number;
         if (g == 0 || (enough && score < best_score)) { best = g; best_score = score; }
+    }
+    double usual = nmax(best_score - colour * total[ndeg * n] / number, 0.0), told = s[best * std_g];
+    if (enough && counted && told * told > strain * strain * usual) {
+        /* this estimate's stated deviation far beyond the degree's usual error (its rule strained here):
+           each degree's own variance now for one of its two, not its usual */
+        steps = 0.0;
+        double least = INFINITY;
+        for (long g = 0; g < ndeg; g++) {
+            steps += total[g * n];
+            double now = v[g * noise_g];
+            double score = (steps + colour * total[(ndeg + g) * n]) / number + colour * now * now;
+            if (score < least) { least = score; best = g; }
+        }
+        steps = 0.0;
+        for (long g = 1; g <= best; g++) steps += total[g * n];
+        best_score = (steps + 2.0 * colour * total[(ndeg + best) * n]) / number;
     }
     if (counted && fabs(a[best * acc_g] - a[0]) > gamma * hypot(s[best * std_g], s[0])) {
         best = 0;
@@ -742,7 +758,8 @@ static void decide(long ndeg, long n, const double *total, double count, const d
 void choose_degrees(long m, long ndeg, long n, const long long *stamps, long long span, const double *acc,
                     long acc_g, long acc_t, const double *std, long std_g, long std_t, const double *noise,
                     long noise_g, long noise_t, const double *between, long between_g, long between_t,
-                    const unsigned char *counted, long least, double gamma, double precision, long refresh,
+                    const unsigned char *counted, long least, double gamma, double strain, double precision,
+                    long refresh,
                     long *chosen, double *stated) {
     long sums = 2 * ndeg + 2, row = sums + 1;  /* each estimate's terms (m, n, row), whether it counts last */
     double *scores = malloc(sizeof(double) * ((size_t)m * n * row + (size_t)(2 * sums + 1) * n));
@@ -784,7 +801,7 @@ void choose_degrees(long m, long ndeg, long n, const long long *stamps, long lon
         for (long j = 0; j < n; j++)
             decide(ndeg, n, total + j, count[j], acc + t * acc_t + j, acc_g, std + t * std_t + j, std_g,
                    noise + t * noise_t + j, noise_g, between + t * between_t + j, between_g, counted[t * n + j],
-                   least, gamma, chosen + t * n + j, stated + t * n + j);
+                   least, gamma, strain, chosen + t * n + j, stated + t * n + j);
     }
     free(scores);
 }
@@ -795,7 +812,7 @@ void choose_degrees(long m, long ndeg, long n, const long long *stamps, long lon
    over all m (the window) are added up directly, estimate by estimate. */
 void choose_last(long m, long ndeg, long n, double *scores, const double *acc, const double *std,
                  const double *noise, const double *between, const unsigned char *counted, long least,
-                 double gamma, long *chosen, double *stated) {
+                 double gamma, double strain, long *chosen, double *stated) {
     long width = 2 * ndeg + 3, row = width * n;
     double total[(7 + 2 * MAX_ALSO) * n], score[7 + 2 * MAX_ALSO];
     if (ndeg > 2 + MAX_ALSO || m < 1) return;
@@ -811,7 +828,7 @@ void choose_last(long m, long ndeg, long n, double *scores, const double *acc, c
     }
     for (long j = 0; j < n; j++)
         decide(ndeg, n, total + j, total[(width - 1) * n + j], acc + j, n, std + j, n, noise + j, n, between + j,
-               n, counted[j], least, gamma, chosen + j, stated + j);
+               n, counted[j], least, gamma, strain, chosen + j, stated + j);
 }
 """
 
@@ -889,10 +906,10 @@ def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
     library.causal_candidates.restype = None
     library.choose_degrees.argtypes = [long, long, long, pointer, ctypes.c_longlong, pointer, long, long, pointer,
                                        long, long, pointer, long, long, pointer, long, long, pointer, long, double,
-                                       double, long, pointer, pointer]  # fmt: skip
+                                       double, double, long, pointer, pointer]  # fmt: skip
     library.choose_degrees.restype = None
     library.choose_last.argtypes = [long, long, long, pointer, pointer, pointer, pointer, pointer, pointer, long,
-                                    double, pointer, pointer]  # fmt: skip
+                                    double, double, pointer, pointer]  # fmt: skip
     library.choose_last.restype = None
     native_kalman.declare(library)
     return library
@@ -1044,6 +1061,7 @@ def choose_degrees(
     counted: np.ndarray,
     least: int,
     gamma: float,
+    strain: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The C function's :func:`neforward_ros.estimation.degree_choice.choose`: the degree index chosen
     at each estimate (M, n) and the standard deviation stated with it (M, n), from every degree's
@@ -1064,7 +1082,7 @@ def choose_degrees(
                            stated.strides[0] // item, stated.strides[1] // item, noise.ctypes.data,
                            noise.strides[0] // item, noise.strides[1] // item, between.ctypes.data,
                            between.strides[0] // item, between.strides[1] // item, mask.ctypes.data, least, gamma,
-                           CHOICE_PRECISION, CHOICE_REFRESH, chosen.ctypes.data, out.ctypes.data)  # fmt: skip
+                           strain, CHOICE_PRECISION, CHOICE_REFRESH, chosen.ctypes.data, out.ctypes.data)  # fmt: skip
     return chosen, out
 
 
@@ -1078,6 +1096,7 @@ def choose_last(
     counted: np.ndarray,
     least: int,
     gamma: float,
+    strain: float,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The C function's choice for the node (:class:`neforward_ros.estimation.degree_choice.DegreePool`):
     the last estimate's degree index (n,) and the standard deviation stated with it (n,). ``scores``
@@ -1093,7 +1112,7 @@ def choose_last(
     chosen = np.zeros(n, dtype=C_LONG)
     out = np.full(n, np.nan)  # an empty window (none begun) states nothing
     library.choose_last(rows, degrees, n, scores.ctypes.data, accelerations.ctypes.data, stated.ctypes.data,
-                        noise.ctypes.data, between.ctypes.data, counted.ctypes.data, least, gamma,
+                        noise.ctypes.data, between.ctypes.data, counted.ctypes.data, least, gamma, strain,
                         chosen.ctypes.data, out.ctypes.data)  # fmt: skip
     return chosen, out
 
