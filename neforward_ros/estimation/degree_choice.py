@@ -141,22 +141,16 @@ def _least(
     estimate, spread = pick(accelerations, chosen), pick(stated, chosen)
     apart = np.abs(estimate - accelerations[0]) > GAMMA * np.hypot(spread, stated[0])
     chosen = np.where(apart, 0, chosen)
+    # the deviation stated: this estimate's coloured noise and the biases read beside it, or where larger
+    # its mean squared error over the second as the scores tell it (they see what one estimate's terms
+    # miss where an acceleration jumps, a trapezoidal move's corners)
     least = np.take_along_axis(score, chosen[..., None, :], axis=-2)[..., 0, :]
-    mean_reference = total[..., degrees, :] / number[..., 0, :]
-    error = np.where(counted, np.maximum(least - colour * mean_reference, 0.0), 0.0)
+    error = np.where(counted, np.maximum(least - colour * usual[..., 0, :], 0.0), 0.0)
     estimate, own, spread = pick(accelerations, chosen), pick(noise, chosen), pick(stated, chosen)
     coloured, expected = colour * own * own, colour * np.square(pick(between, chosen))
     beyond_own = np.maximum(spread * spread - own * own - expected, 0.0)
     beyond_reference = np.maximum(np.square(estimate - accelerations[0]) - colour * np.square(noise[0]), 0.0)
-    return chosen, stated_with(coloured + beyond_own + beyond_reference, error)
-
-
-def stated_with(variance: np.ndarray, error: np.ndarray) -> np.ndarray:
-    """The standard deviation stated with a chosen estimate: the root of its own ``variance`` (its
-    coloured noise and the biases read beside it) or, where larger, of its mean squared error over the
-    last second as the scores tell it (``error``). Where an acceleration jumps (a trapezoidal move's
-    corners) or the noise is coloured (a real arm's), the scores see what one estimate's terms miss."""
-    return np.sqrt(np.maximum(variance, error))
+    return chosen, np.sqrt(np.maximum(coloured + beyond_own + beyond_reference, error))
 
 
 def choose(
