@@ -237,6 +237,7 @@ class ErrorScores:
         self.waiting: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
         self._kept: int | None = None  # the stamp of the last estimates kept
         self._ranking: tuple[np.ndarray, np.ndarray] | None = None  # see _rank; None: to be worked out
+        self._fair = np.zeros((count, joints), dtype=bool)  # (C, joints): whose record is fair (see _rank)
 
     def clear(self, joints: list[int] | None = None, keep_record: bool = False) -> None:
         """Forget the scores and waiting estimates of these joints (all: None), whose history restarted; with
@@ -309,12 +310,20 @@ class ErrorScores:
         known = ok[first, columns]
         return np.where(known, ranked[first, columns], -1), np.where(known, errors[first, columns], np.nan)
 
+    def ranked(self, rows: slice, available: np.ndarray, joints: np.ndarray) -> np.ndarray:
+        """For these joints, which candidates among ``rows`` are ``available`` now ((C, m) or (C, 1), bool, as
+        for :meth:`choose`) and have a fair record, the record can rank (rows' count, m)."""
+        if self._ranking is None:
+            self._ranking = self._rank()
+        return self._fair[rows][:, joints] & available[rows]
+
     def _rank(self) -> tuple[np.ndarray, np.ndarray]:
         """Per joint, the candidates in order of their two means' sum (those without a fair record last)
         and, in that order, their short memory's root mean square error (inf: no fair record)."""
         weight = self._weight
         most = weight[1].max(axis=0)
         fair = (weight > 0.0).all(axis=0) & (weight[1] >= LEAST_WEIGHT * most) & (most >= LEAST_RECORD)
+        self._fair = fair
         mean = np.where(fair, self._total / np.where(fair, weight, 1.0), np.inf)
         order = np.argsort(mean[0] + mean[1], axis=0, kind="stable")
         return order, np.sqrt(np.take_along_axis(mean[0], order, axis=0))

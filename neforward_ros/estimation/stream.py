@@ -33,7 +33,7 @@ from neforward_ros.estimation.adaptive import (
     degree_fit,
     noise_reach,
 )
-from neforward_ros.estimation.causal_choice import DEGREES, ErrorScores, candidates, half_widths, usable
+from neforward_ros.estimation.causal_choice import DEGREES, LEAST_RECORD, ErrorScores, candidates, half_widths, usable
 from neforward_ros.estimation.clock import SampleClock
 from neforward_ros.estimation.coverage import uncovered
 from neforward_ros.estimation.estimate import JointEstimate
@@ -93,6 +93,14 @@ forgotten, or unfair) gets the bank's own estimate or the rule's for the same de
 smaller deviation (the bank's own alone until 2026-11-28, when it served from a start: its models were near
 their prior, 79x the steady 99th percentile of the error at 100 Hz through 12 bits; ``test_transients.py``).
 After a restart the bank's own serves: its models start from the weights learnt before the restart."""
+MODELS_UNRANKED_BY_DEVIATION = True
+"""kalman: where a joint's record holds but cannot rank every model of the bank yet (one has not converged from
+its prior, or has been scored too little for a fair record: the first 1-2.5 s after a start or a restart, the
+0.6 s model the last), the bank's own estimate serves where it states a smaller deviation than the chosen fit's
+record (its root mean square error). The fits alone served there until 2026-11-29: on sums of sines at 100 Hz
+through 20 bits the best fit's error is about 3x the 0.25 s model's, which is chosen once its record is fair,
+0.8 s after a start, and the worst error in the second after a start or a time reset was up to 3.5x the steady
+99th percentile on 20 ms (``bench/bench_transients.py``)."""
 BANK_HOLDS_ITS_OVERRULING = True
 """kalman, fixed lag: where the bank's own estimate overruled a joint's chosen candidate at the last target,
 the candidate returns only where it agrees with the bank's within the deviation the bank stated over the last
@@ -100,7 +108,17 @@ half window (root mean square), not within a larger one the bank states at this 
 2026-11-29 one such target let a stale choice back: after a start, minimum-jerk moves at 1 kHz through 12
 bits, the longest window (the start's dwell had chosen it) served 6-15.7 rad/s^2 off for 36 ms, where the
 bank's own was 1-3 off (4.18x the steady 99th percentile; 1.91x since; ``bench/bench_transients.py``)."""
-
+RECORD_OF_REST = True
+"""The settings that choose by their candidates' record (polyfit causal, kalman): until a joint's record holds
+:data:`~.causal_choice.LEAST_RECORD` scores of estimates whose samples up to their stamp changed (counted since the
+start; kept through a restart), the rule's estimate serves it, or at a fixed lag the Kalman bank's own. Where the
+readings do not change every candidate is exact, and the record ranks them by their floors alone: the least
+noisy, the longest window of degree 2, which lags the first move's start, and the first scores of that move
+can rank a short window that an encoder's rounding then throws off. Until 2026-11-29 the record chose there: on
+minimum-jerk moves after the start's dwell the worst error in the second after the start was up to 5.9x the
+steady 99th percentile (500 Hz through 20 bits: 15.7 rad/s^2 off, where the rule was within 4) and 4.5x (250 Hz
+through 12 bits: a short window of degree 3, 56 rad/s^2 off stating 2.7), 1.7x and 1.2x since
+(``bench/bench_transients.py``). Later moves start from a record that remembers the earlier ones."""
 
 _REPEATS = "repeats"
 
@@ -176,6 +194,8 @@ class StreamingEstimator:
         # where kept for scoring (else None)
         self._candidates: np.ndarray | None = None
         self._overruled = np.zeros(len(self.joint_names), dtype=bool)  # the rule's estimate taken at the last check
+        # per joint, how many scores its record holds that were made where its readings changed (RECORD_OF_REST)
+        self._record_moved = np.zeros(len(self.joint_names))
         # the rule's squared deviations at the checks, exponentially weighted over half a window: sum, weight,
         # and when last added to (s; NaN: never)
         self._rule_spread = np.zeros((2, len(self.joint_names)))
@@ -430,6 +450,7 @@ class StreamingEstimator:
         self._overruled[columns] = False
         if not keep_record:
             self._rule_spread[:, columns] = 0.0
+            self._record_moved[columns] = 0.0
         self._rule_checked[columns] = np.nan
         self._rule_last[columns] = np.nan
 
@@ -713,6 +734,8 @@ class StreamingEstimator:
         # check failed, at every estimate until it holds again; against the Kalman bank's own estimate at a
         # fixed lag, at every estimate (BANK_GUARDS_EVERY_TARGET).
         guarded = BANK_GUARDS_EVERY_TARGET and bank is not None and lead > 0.0
+        if RECORD_OF_REST:  # a record made while the readings did not change cannot rank the candidates
+            known &= self._record_moved[joints] >= LEAST_RECORD
         if self._candidates is None and known.all() and not self._overruled[joints].any() and not guarded:
             # between checks: unchecked unless the estimate left the last check's rule estimate by more than
             # that check would allow now (a move starting after a dwell, whose record chose a short window:
@@ -763,6 +786,11 @@ class StreamingEstimator:
                 served = tuple(np.where(own, a, b) for a, b in zip(bank, fallback, strict=True))
             rule = tuple(np.where(chosen < 0, a, b) for a, b in zip(served, rule, strict=True))
         out = tuple(np.where(known, a, b) for a, b in zip(mine, rule, strict=True))
+        if MODELS_UNRANKED_BY_DEVIATION and bank is not None:  # a record that cannot rank the bank's models yet
+            unranked = (chosen >= 0) & ~self._scores.ranked(slice(fits, None), available, joints).all(axis=0)
+            own = unranked & (bank[3] < error)  # the bank's own, where it states less than the chosen's record
+            if own.any():
+                out = tuple(np.where(own, a, b) for a, b in zip(bank, out, strict=True))
         held = self._recordless[joints] & (chosen < 0)  # a start's warm-up until the record holds
         self._recordless[joints] = held
         if HOLD_UNTIL_RECORD and held.any():
@@ -781,24 +809,28 @@ class StreamingEstimator:
         for stamp, estimates, floors in self._scores.due(now):
             reference = np.full(len(self.joint_names), np.nan)
             for group in self._groups:
-                reference[group.joints] = self._reference(stamp, group)
+                reference[group.joints], changed = self._reference(stamp, group)
+                self._record_moved[group.joints] += changed
             self._scores.score(stamp, estimates, floors, reference)
 
-    def _reference(self, stamp: int, group: JointHistory) -> np.ndarray:
+    def _reference(self, stamp: int, group: JointHistory) -> tuple[np.ndarray, np.ndarray]:
         """The default setting's centred estimate of q'' at ``stamp`` for the group's joints (NaN where its
-        samples do not cover it), the reference the causal candidates are scored against."""
+        samples do not cover it), the reference the causal candidates are scored against; and whether each
+        joint's readings changed within the window's half up to ``stamp`` (False where not covered)."""
         stamps = group.stamps
         support = self._reference_support
         if uncovered(stamps, stamp, support, group.holes, group.end_slack(), group.left_out) is not None:
-            return np.full(len(group.joints), np.nan)
+            return np.full(len(group.joints), np.nan), np.zeros(len(group.joints), dtype=bool)
         half = self.settings.window / 2.0
         half_ns = round(half * NS)
-        times, positions, velocities, by_velocity, _ = self._samples(group, stamp - half_ns, stamp + half_ns)
+        times, positions, velocities, by_velocity, before = self._samples(group, stamp - half_ns, stamp + half_ns)
         values = np.where(by_velocity, velocities, positions)
         derivative = np.where(by_velocity, 1, 2)
         order, lower = degrees(None, True, False)
         _, d1, d2, _, _ = adaptive_fit(times, values, group.time_of(stamp), half, order, half, derivative, lower)
-        return np.where(by_velocity, d1, d2)
+        upto = before + int(times[before:].searchsorted(group.time_of(stamp), side="right"))  # the estimate's side
+        changed = (values[before:upto] != values[before]).any(axis=0)
+        return np.where(by_velocity, d1, d2), changed
 
     @staticmethod
     def _samples(group: JointHistory, first_ns: int, last_ns: int) -> tuple[np.ndarray, ...]:
