@@ -311,8 +311,8 @@ class ErrorScores:
         return np.where(known, ranked[first, columns], -1), np.where(known, errors[first, columns], np.nan)
 
     def ranked(self, rows: slice, available: np.ndarray, joints: np.ndarray) -> np.ndarray:
-        """For these joints, which candidates among ``rows`` are ``available`` now ((C, m) or (C, 1), bool, as
-        for :meth:`choose`) and have a fair record, the record can rank (rows' count, m)."""
+        """For these joints (m,), which candidates among ``rows`` the record can rank now (rows' count, m), bool:
+        those ``available`` ((C, m) or (C, 1), as for :meth:`choose`) whose record is fair (:meth:`_rank`)."""
         if self._ranking is None:
             self._ranking = self._rank()
         return self._fair[rows][:, joints] & available[rows]

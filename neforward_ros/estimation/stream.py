@@ -95,8 +95,8 @@ their prior, 79x the steady 99th percentile of the error at 100 Hz through 12 bi
 After a restart the bank's own serves: its models start from the weights learnt before the restart."""
 MODELS_UNRANKED_BY_DEVIATION = True
 """kalman: where a joint's record holds but cannot rank every model of the bank yet (one has not converged from
-its prior, or has been scored too little for a fair record: the first 1-2.5 s after a start or a restart, the
-0.6 s model the last), the bank's own estimate serves where it states a smaller deviation than the chosen fit's
+its prior, or has been scored too little for a fair record: the 0.6 s model the last, 1.8 s after a start and
+1.65 s after a time reset), the bank's own estimate serves where it states a smaller deviation than the chosen fit's
 record (its root mean square error). The fits alone served there until 2026-11-29: on sums of sines at 100 Hz
 through 20 bits the best fit's error is about 3x the 0.25 s model's, which is chosen once its record is fair,
 0.8 s after a start, and the worst error in the second after a start or a time reset was up to 3.5x the steady
