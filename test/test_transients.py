@@ -42,8 +42,8 @@ def test_a_move_starting_between_the_causal_checks_is_checked_at_once(monkeypatc
     made in the dwell keeps a short window, which reads the first encoder step as hundreds of rad/s^2; the
     rule checks only every fifth target there. Measured 2.12x (2026-11-28). Since 2026-11-29 the first move
     after a start is also served by the rule until the record holds scores made in motion
-    (``RECORD_OF_REST``: 1.90x with both, 1.90x with either alone); that guard is left out here, so that this
-    test tells whether the leaps are checked."""
+    (``RECORD_OF_REST``: 1.90x with both and with either alone, 79.5x with neither); that guard is left out
+    here, so that this test tells whether the leaps are checked."""
     monkeypatch.setattr(stream_module, "RECORD_OF_REST", False)
     ratio = worst_over_steady(CAUSAL, "minjerk", 5, 1000.0, 12)
     assert ratio <= 3.0, ratio
@@ -156,10 +156,10 @@ def test_a_return_within_one_target_s_deviation_fails(monkeypatch) -> None:
 
 def test_until_the_record_ranks_the_bank_s_models_its_own_estimate_serves_where_it_states_less() -> None:
     """kalman, 20 ms, sums of sines to 1.5 Hz at 100 Hz through 20 bits: from a start (and after the time reset,
-    where its filters restart) the record ranks the fits and the bank's fastest models before the 0.25 s model
-    its own estimate rests on has converged and been scored; the best fit is about 3x that model's error. The
-    bank's own serves where it states less than the chosen fit's record until the record ranks the models it
-    rests on. Measured 1.05x after the start, 1.26x after the reset (2026-11-29); 4.08x and 4.28x without."""
+    where its filters restart) the record ranks the fits and the bank's fastest models before its 0.25 s model,
+    the steady choice here, has converged and been scored; the best fit is about 3x that model's error. The
+    bank's own serves where it states less than the chosen fit's record until the record ranks every model of
+    the bank. Measured 1.05x after the start, 1.26x after the reset (2026-11-29); 4.08x and 4.28x without."""
     p99, worst, _ = bench_transients.run(KALMAN, "sines1.5", 6, 100.0, 20)
     assert max(worst) / p99 <= 2.0, (worst, p99)
 
@@ -174,8 +174,8 @@ def test_the_fits_alone_until_the_bank_s_models_are_ranked_fail(monkeypatch) -> 
 def test_a_record_made_at_rest_does_not_choose_for_the_first_move() -> None:
     """polyfit causal, minimum-jerk moves at 500 Hz through 20 bits, the joints resting from the start: over
     the dwell every candidate is exact and the record ranks them by their floors alone (the longest window of
-    degree 2, which lags a move's start). Until a joint's record holds a score made where its readings changed,
-    the rule's estimate serves. Measured 1.83x after the start (2026-11-29); 5.10x without."""
+    degree 2, which lags a move's start). Until a joint's record holds ``LEAST_RECORD`` scores made where its
+    readings changed, the rule's estimate serves. Measured 1.83x after the start (2026-11-29); 5.10x without."""
     p99, worst, _ = bench_transients.run(CAUSAL, "minjerk", 7, 500.0, 20)
     assert worst[0] / p99 <= 2.5, (worst, p99)
 
