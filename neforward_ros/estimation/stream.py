@@ -827,8 +827,9 @@ class StreamingEstimator:
         values = np.where(by_velocity, velocities, positions)
         derivative = np.where(by_velocity, 1, 2)
         order, lower = degrees(None, True, False)
-        _, d1, d2, _, _ = adaptive_fit(times, values, group.time_of(stamp), half, order, half, derivative, lower)
-        upto = before + int(times[before:].searchsorted(group.time_of(stamp), side="right"))  # the estimate's side
+        at = group.time_of(stamp)
+        _, d1, d2, _, _ = adaptive_fit(times, values, at, half, order, half, derivative, lower)
+        upto = before + int(times[before:].searchsorted(at, side="right"))  # the estimate's side
         changed = (values[before:upto] != values[before]).any(axis=0)
         return np.where(by_velocity, d1, d2), changed
 
