@@ -4,6 +4,7 @@ stamps, against closed forms (polynomials, even spacing, white noise of a known 
 from __future__ import annotations
 
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -71,6 +72,23 @@ def test_a_joint_moving_a_step_or_two_a_sample_reads_its_step() -> None:
         y = (np.round(q / quantum) * quantum)[:, None]
         assert np.all(np.diff(y[:, 0]) != 0.0)
         assert noise_of(t, y)[1][0] == pytest.approx(quantum)
+
+
+def test_a_joint_with_no_divisor_of_its_changes_beside_one_with_a_divisor_warns_nothing() -> None:
+    """Two joints' changes between samples, their smallest change 1, no noise read: the first's changes
+    are 3-7 thirds (the step 1/3: base divisor 3), the second's 1, 1 + 1/4001 and 2 + 1/4003 (on the grid
+    of 1 within LATTICE; their denominators' least common multiple is past LARGEST_DIVISOR, base 0). The
+    steps are read without numpy's divide-by-zero warning (the step's fractions were divided by the
+    second joint's base of 0 too, and warned in every bag read through the numpy fits)."""
+    first = np.array([1.0, 4 / 3, 5 / 3, 2.0, 7 / 3, 1.0])
+    second = np.array([1.0, 1.0 + 1 / 4001, 1.0, 2.0 + 1 / 4003, 1.0, 1.0])
+    changes = np.stack([first, second], axis=1)
+    smallest = np.ones(2)
+    assert adaptive.base_divisor(changes, smallest).tolist() == [3.0, 0.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        step = adaptive.grid_step(changes, smallest, np.zeros(2))
+    np.testing.assert_allclose(step, [1 / 3, 1.0], rtol=1e-12)
 
 
 @pytest.mark.parametrize("compiled", [True, False])

@@ -245,7 +245,7 @@ def grid_step(
         tried = hidden & (divisor >= 2.0) & (divisor <= LARGEST_DIVISOR)
         if not tried.any():
             continue
-        candidate = smallest / divisor
+        candidate = smallest / np.where(tried, divisor, 1.0)  # (a base of 0, none found: not tried)
         fits = tried & on_grid(differences, candidate, inside) & (white < HIDDEN * candidate * _ROUNDING)
         step = np.where(fits, candidate, step)
     return step
