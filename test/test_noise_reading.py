@@ -79,7 +79,7 @@ def test_a_joint_with_no_divisor_of_its_changes_beside_one_with_a_divisor_warns_
     are 3-7 thirds (the step 1/3: base divisor 3), the second's 1, 1 + 1/4001 and 2 + 1/4003 (on the grid
     of 1 within LATTICE; their denominators' least common multiple is past LARGEST_DIVISOR, base 0). The
     steps are read without numpy's divide-by-zero warning (the step's fractions were divided by the
-    second joint's base of 0 too, and warned in every bag read through the numpy fits)."""
+    second joint's base of 0 too: a RuntimeWarning in the output of the numpy fits, 8 in the test suite's)."""
     first = np.array([1.0, 4 / 3, 5 / 3, 2.0, 7 / 3, 1.0])
     second = np.array([1.0, 1.0 + 1 / 4001, 1.0, 2.0 + 1 / 4003, 1.0, 1.0])
     changes = np.stack([first, second], axis=1)
