@@ -236,8 +236,7 @@ class ErrorScores:
         self._last = np.full(joints, -1, dtype=np.int64)  # the stamp last scored per joint; -1: none
         self.waiting: deque[tuple[int, np.ndarray, np.ndarray]] = deque()
         self._kept: int | None = None  # the stamp of the last estimates kept
-        self._ranking: tuple[np.ndarray, np.ndarray] | None = None  # see _rank; None: to be worked out
-        self._fair = np.zeros((count, joints), dtype=bool)  # (C, joints): whose record is fair (see _rank)
+        self._ranking: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # see _rank; None: to be worked out
 
     def clear(self, joints: list[int] | None = None, keep_record: bool = False) -> None:
         """Forget the scores and waiting estimates of these joints (all: None), whose history restarted; with
@@ -299,9 +298,7 @@ class ErrorScores:
         root mean square error over the short memory (m,)); -1 and NaN where a joint has no fair record
         (its most scored candidate's weigh less than :data:`LEAST_RECORD`), and a candidate whose scores weigh
         less than :data:`LEAST_WEIGHT` of those is not chosen."""
-        if self._ranking is None:
-            self._ranking = self._rank()
-        order, rms = self._ranking  # (C, joints) each: candidates best first, and their short RMS errors
+        order, rms, _ = self._ranked_now()  # (C, joints) each: candidates best first, and their short RMS errors
         columns = np.arange(len(joints))
         ranked, errors = order[:, joints], rms[:, joints]
         now = available[ranked, columns] if available.shape[1] > 1 else available[ranked, 0]
@@ -313,17 +310,21 @@ class ErrorScores:
     def ranked(self, rows: slice, available: np.ndarray, joints: np.ndarray) -> np.ndarray:
         """For these joints (m,), which candidates among ``rows`` the record can rank now (rows' count, m), bool:
         those ``available`` ((C, m) or (C, 1), as for :meth:`choose`) whose record is fair (:meth:`_rank`)."""
+        return self._ranked_now()[2][rows][:, joints] & available[rows]
+
+    def _ranked_now(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_rank`'s result for the scores so far, worked out once after each change of them."""
         if self._ranking is None:
             self._ranking = self._rank()
-        return self._fair[rows][:, joints] & available[rows]
+        return self._ranking
 
-    def _rank(self) -> tuple[np.ndarray, np.ndarray]:
-        """Per joint, the candidates in order of their two means' sum (those without a fair record last)
-        and, in that order, their short memory's root mean square error (inf: no fair record)."""
+    def _rank(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per joint, the candidates in order of their two means' sum (those without a fair record last),
+        in that order their short memory's root mean square error (inf: no fair record), and whose record
+        is fair (in the candidates' own order), each (C, joints)."""
         weight = self._weight
         most = weight[1].max(axis=0)
         fair = (weight > 0.0).all(axis=0) & (weight[1] >= LEAST_WEIGHT * most) & (most >= LEAST_RECORD)
-        self._fair = fair
         mean = np.where(fair, self._total / np.where(fair, weight, 1.0), np.inf)
         order = np.argsort(mean[0] + mean[1], axis=0, kind="stable")
-        return order, np.sqrt(np.take_along_axis(mean[0], order, axis=0))
+        return order, np.sqrt(np.take_along_axis(mean[0], order, axis=0)), fair
