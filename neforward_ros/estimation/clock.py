@@ -463,10 +463,11 @@ class SampleClock:
     @property
     def timing(self) -> float:
         """s: how far the samples' times may be from their stamps, as far as this clock can tell yet: the
-        stamps' spread about the newest line that holds them until they are found to be write times or the
-        samples' own (:attr:`written`, :attr:`kept`); 0 once they are, or where no line holds them. Either
-        the stamps or the line is right, and the other off by about that much: the fits that extrapolate to
-        the newest sample take the noise it makes into account (:func:`~.adaptive.timing_noise`)."""
+        stamps' spread about the newest line that holds them until they are found to be write times
+        (:attr:`written`) or the samples' own (:attr:`on_stamps`: for good, or by the last check or look that
+        could tell); 0 once they are, or where no line holds them. Either the stamps or the line is right, and
+        the other off by about that much: the fits that extrapolate to the newest sample take the noise it
+        makes into account (:func:`~.adaptive.timing_noise`)."""
         if self.written or self.on_stamps or not self.clock.holds:
             return 0.0
         return self.clock.spread

@@ -998,7 +998,7 @@ def _columns(states: np.ndarray, by_velocity: np.ndarray) -> tuple[np.ndarray, n
 def _timing(group: JointHistory, lead: float) -> float:
     """s: how far a causal fit's samples' times may be off (:attr:`~.clock.SampleClock.timing`): 0 for a fit
     whose windows reach past the target. Those are centred where the motion's change shows on both sides,
-    and held from a start on write times after a rest (the default within 1.9x of its steady 99th
+    and held from a start on write times after a rest (the default within 1.8x of its steady 99th
     percentile, ``bench/bench_write_jitter.py --start``); the whole-recording fit (the bag tool's for the
     default) has no clock running as it fits."""
     clock = group.sample_clock
