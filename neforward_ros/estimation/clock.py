@@ -395,7 +395,7 @@ class SampleClock:
         self._kept_by = 0  # the checks that found the stamps to be the samples' times, after SPAN samples
         self._written_by = 0  # the consecutive checks that found them to be write times
         self._told = False  # whether a check (or the first look) told the stamps to be the samples' times for now
-        self._on_stamps = on_stamps  # whether the last check (or look) that could tell read far less noise on them
+        self._on_stamps = on_stamps  # whether a check (or look) read far less noise on them, none voting since
         self._untold: np.ndarray | None = None  # per joint, the least noise the last check read, where it told nothing
         self._unlooked = 0  # samples since the last check or look
         self._jittered = False  # whether an interval left whole usual intervals by more than JITTER of one
@@ -457,17 +457,17 @@ class SampleClock:
     @property
     def on_stamps(self) -> bool:
         """Whether the stamps were found to be the samples' times: for the rest of the stream (:attr:`kept`), or
-        by the last check that could tell (a restart's clock starts with it: its :attr:`timing` 0)."""
+        by a check or look that read far less noise on them than on the line, no check since voting for write
+        times (a restart's clock starts with it: its :attr:`timing` 0)."""
         return not self.written and (self.kept or self._on_stamps)
 
     @property
     def timing(self) -> float:
         """s: how far the samples' times may be from their stamps, as far as this clock can tell yet: the
         stamps' spread about the newest line that holds them until they are found to be write times
-        (:attr:`written`) or the samples' own (:attr:`on_stamps`: for good, or by the last check or look that
-        could tell); 0 once they are, or where no line holds them. Either the stamps or the line is right, and
-        the other off by about that much: the fits that extrapolate to the newest sample take the noise it
-        makes into account (:func:`~.adaptive.timing_noise`)."""
+        (:attr:`written`) or the samples' own (:attr:`on_stamps`); 0 once they are, or where no line holds
+        them. Either the stamps or the line is right, and the other off by about that much: the fits that
+        extrapolate to the newest sample take the noise it makes into account (:func:`~.adaptive.timing_noise`)."""
         if self.written or self.on_stamps or not self.clock.holds:
             return 0.0
         return self.clock.spread
@@ -543,8 +543,9 @@ class SampleClock:
             self._telling_from = self._seen
         moving = noise > LEAST_NOISE
         written = stamps_are_write_times(noise, clock_noise, moving)
-        # (the stamps read under WRITTEN of the line's noise, as the line under WRITTEN of theirs for a vote)
-        self._on_stamps = stamps_are_write_times(clock_noise, noise, moving)
+        # (the stamps read under WRITTEN of the line's noise, as the line under WRITTEN of theirs for a vote;
+        # where neither stands out, the verdict before stands)
+        self._on_stamps = not written and (self._on_stamps or stamps_are_write_times(clock_noise, noise, moving))
         if self._jittered and not (written or self._on_stamps):  # neither clock stands out yet: soon again
             self._untold = least
         if look:
