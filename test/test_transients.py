@@ -237,14 +237,14 @@ def test_a_start_on_jittered_stamps_whose_arm_rests_tells_the_clock_soon_after_i
     jitter, the arm at rest at the start: until a check tells the clock, the causal fits take the stamps'
     spread about the clock's line as timing noise (:attr:`~neforward_ros.estimation.clock.SampleClock.timing`),
     which at 20 bits widens their windows at the first move's start; a check (or a look, over fewer samples
-    than a check) is made as soon as the move would tell (``clock.SOON``). Measured 1.30x."""
+    than a check) is made as soon as the move would tell (``clock.SOON``). Measured 0.94x."""
     p99, worst, _ = bench_transients.run(CAUSAL, "minjerk", 2, 250.0, 20)
     assert worst[0] / p99 <= 3.0, worst[0] / p99
 
 
 def test_a_clock_that_waits_for_its_next_check_fails(monkeypatch) -> None:
     """The planted bug: the checks keep their cadence whatever the arm does (``clock.SOON`` never): the
-    first move's start is fitted with the timing noise until the check at 128 samples (3.48x)."""
+    first move's start is fitted with the timing noise until the check at 128 samples (3.63x)."""
     from neforward_ros.estimation import clock
 
     monkeypatch.setattr(clock, "SOON", 10**9)
