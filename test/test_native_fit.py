@@ -186,3 +186,31 @@ def test_a_whole_recording_shared_among_threads_gives_the_very_same_numbers(monk
     shared = adaptive.adaptive_fits(t, y, t, 0.1, 4, 0.1)
     for k in range(4):
         np.testing.assert_array_equal(shared[k], serial[k])
+
+
+def test_c_and_numpy_floor_the_noise_alike_where_the_times_are_uncertain() -> None:
+    """With the samples' times uncertain by ``timing`` (a causal fit's until the stream's clock can tell
+    whether its stamps are write times), C and numpy floor the noise read at
+    :func:`~neforward_ros.estimation.adaptive.timing_noise` alike: the same windows chosen, the estimates
+    within rounding; and the floor changes the chosen window of many."""
+    lib = library()
+    rng = np.random.default_rng(2027)
+    changed = 0
+    for _ in range(400):
+        t, y, target, h, order, lower, lead, derivative, still = window(rng)
+        timing = float(rng.uniform(0.01, 0.2)) * float(np.median(np.diff(t)))
+        want = adaptive.python_adaptive_fit(t, y, target, h, order, lead, derivative, lower, timing)
+        got = native_fit.fit(lib, t, y, target, *adaptive._ladder_and_leads(h, lead), order, derivative,
+                             adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._GAIN, adaptive.FLOOR,
+                             adaptive.GROWTH, adaptive.LATTICE, lower, (), timing)  # fmt: skip
+        assert got is not None
+        got = tuple(entry[0] for entry in got)
+        np.testing.assert_array_equal(got[4], want[4])
+        moving = slice(1, None) if still else slice(None)
+        bound = 2e-6 if lead < 0.05 else 5e-8
+        for k in (0, 1, 2):
+            scale = np.abs(want[k]) + want[3] * h ** (2 - k) + 1e-5 * np.abs(y).max(axis=0) / h**k
+            assert np.all(np.abs(got[k] - want[k])[moving] / scale[moving] <= bound), (k, order, lead)
+        plain = adaptive.python_adaptive_fit(t, y, target, h, order, lead, derivative, lower)
+        changed += not np.array_equal(plain[2], want[2])
+    assert changed >= 100, changed

@@ -334,3 +334,21 @@ def test_the_kalman_deviation_grows_with_innovations_the_model_does_not_expect(m
         q = q + 2e-5 * lfilter(b, a, rng.normal(size=q.shape), axis=0) + rng.normal(0.0, 1e-6, q.shape)
         z = _kalman_rms_z(mode, t, q, acceleration)
         assert 0.5 <= z <= 2.0, (seed, z)
+
+
+def test_the_noise_of_uncertain_times_is_their_spread_at_the_fastest_speed() -> None:
+    """Hand values: joints moving at constant speeds (0.5 and -2 rad/s, one still) on irregular stamps,
+    times uncertain by 1 ms: 0.5 and 2 mrad whatever the stamps (a stride's change over its span is the
+    speed), 0 for the still one; a joint that speeds up gives its fastest stride's; too few samples, or
+    samples sharing a stamp, give nothing."""
+    from neforward_ros.estimation.adaptive import TIMING_STRIDE, timing_noise
+
+    rng = np.random.default_rng(8)
+    t = np.cumsum(rng.uniform(0.005, 0.015, 40))
+    q = np.stack([0.5 * t, -2.0 * t, np.full_like(t, 0.3)], axis=1)
+    np.testing.assert_allclose(timing_noise(t, q, 1e-3), [5e-4, 2e-3, 0.0], rtol=1e-9, atol=1e-15)
+    faster = np.where(t > t[20], 3.0 * (t - t[20]) + 0.5 * t[20], 0.5 * t)[:, None]  # 0.5 then 3 rad/s
+    np.testing.assert_allclose(timing_noise(t, faster, 1e-3), [3e-3], rtol=1e-9)
+    assert not timing_noise(t[:TIMING_STRIDE], q[:TIMING_STRIDE], 1e-3).any()
+    same = np.zeros(TIMING_STRIDE + 1)
+    assert not timing_noise(same, np.arange(TIMING_STRIDE + 1.0)[:, None], 1e-3).any()

@@ -215,6 +215,38 @@ def test_a_clock_that_waits_again_after_the_reset_fails(monkeypatch) -> None:
     """The planted bug: each restart's clock starts as a start's (the verdict not carried over)."""
     from neforward_ros.estimation.clock import SampleClock
 
-    monkeypatch.setattr(stream_module, "SampleClock", lambda released=False: SampleClock())
+    monkeypatch.setattr(stream_module, "SampleClock", lambda released=False, on_stamps=False: SampleClock())
     with pytest.raises(AssertionError):
         test_after_a_time_reset_the_estimates_do_not_wait_for_the_clock_again()
+
+
+def test_a_clock_that_forgets_the_stamps_verdict_at_the_reset_fails(monkeypatch) -> None:
+    """The planted bug: each restart's clock lets estimates through at once but no longer knows the stamps to
+    be the samples' times (``on_stamps`` not carried over): its causal fits take the stamps' jitter about its
+    line as the samples' timing uncertainty until a check finds them again (:attr:`SampleClock.timing`), and
+    the rule, its windows widened by it, overruled the record (20.9x the steady 99th percentile)."""
+    from neforward_ros.estimation.clock import SampleClock
+
+    monkeypatch.setattr(stream_module, "SampleClock", lambda released=False, on_stamps=False: SampleClock(released))
+    with pytest.raises(AssertionError):
+        test_after_a_time_reset_the_rule_s_spread_goes_on(monkeypatch)
+
+
+def test_a_start_on_jittered_stamps_whose_arm_rests_tells_the_clock_soon_after_it_moves() -> None:
+    """polyfit causal, minimum-jerk moves at 250 Hz through 20 bits, the stamps the samples' own with +-5 %
+    jitter, the arm at rest at the start: until a check tells the clock, the causal fits take the stamps'
+    spread about the clock's line as timing noise (:attr:`~neforward_ros.estimation.clock.SampleClock.timing`),
+    which at 20 bits widens their windows at the first move's start; a check (or a look, over fewer samples
+    than a check) is made as soon as the move would tell (``clock.SOON``). Measured 0.94x."""
+    p99, worst, _ = bench_transients.run(CAUSAL, "minjerk", 2, 250.0, 20)
+    assert worst[0] / p99 <= 3.0, worst[0] / p99
+
+
+def test_a_clock_that_waits_for_its_next_check_fails(monkeypatch) -> None:
+    """The planted bug: the checks keep their cadence whatever the arm does (``clock.SOON`` never): the
+    first move's start is fitted with the timing noise until the check at 128 samples (3.63x)."""
+    from neforward_ros.estimation import clock
+
+    monkeypatch.setattr(clock, "SOON", 10**9)
+    with pytest.raises(AssertionError):
+        test_a_start_on_jittered_stamps_whose_arm_rests_tells_the_clock_soon_after_it_moves()

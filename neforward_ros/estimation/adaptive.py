@@ -159,6 +159,27 @@ within this of a window holding one."""
 TURNS = 2.0
 """A window on an encoder's grid holds at most this many times its turns independent rounding errors
 (:func:`turns_within`; the compiled fit writes the same number)."""
+TIMING_STRIDE = native_fit.TIMING_STRIDE
+"""Samples apart over which a joint's speed is read for the noise its stamps' uncertainty makes
+(:func:`timing_noise`): across a few samples a write delay's share of the interval is a fraction of it."""
+
+
+def timing_noise(times: np.ndarray, values: np.ndarray, timing: float) -> np.ndarray:
+    """The position noise (n,) that samples (k, n) at ``times`` (k,) carry where their times may be off by
+    about ``timing`` (s, a standard deviation): that times the fastest speed over :data:`TIMING_STRIDE`
+    samples, zeros where too few. Until a stream's clock can tell whether its stamps are the samples' times
+    or the times a driver wrote them, each may be off by their spread about the other
+    (:attr:`~.clock.SampleClock.timing`), and a joint's motion over that time is noise that follows its speed:
+    read from sixth differences over a window where the joint starts to move after a rest, it is read mostly
+    where the joint was slower, and a causal fit's intervals broke on it (from a start on write times after
+    a rest, the causal settings' worst error in the first second over 100 times the steady 99th percentile:
+    ``bench/bench_write_jitter.py --start``)."""
+    if len(times) <= TIMING_STRIDE:
+        return np.zeros(values.shape[1])
+    apart = times[TIMING_STRIDE:] - times[:-TIMING_STRIDE]
+    moved = np.abs(values[TIMING_STRIDE:] - values[:-TIMING_STRIDE])
+    least = timing * moved / np.where(apart > 0.0, apart, 1.0)[:, None]  # (the compiled fit's order)
+    return np.max(np.where((apart > 0.0)[:, None], least, 0.0), axis=0)
 
 
 def ladder(h_max: float) -> np.ndarray:
@@ -893,6 +914,7 @@ def adaptive_fit(
     lead: float,
     derivative: np.ndarray,
     lower: int | None = None,
+    timing: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`adaptive_fits` at one target (the stream's): ``times, values`` the samples of the
     largest window ([target + lead - 2 h_max, target + lead]), which the noise is read from too;
@@ -903,9 +925,10 @@ def adaptive_fit(
     or a motion too fast for the rate: the two look alike to differences). Every level's fit in one
     vectorised pass, with the arithmetic of :func:`neforward_ros.estimation.fit.polynomial_fits`; or,
     once compiled, the same in one C call (:mod:`neforward_ros.estimation.native_fit`). ``lower``: as
-    for :func:`adaptive_fits`."""
+    for :func:`adaptive_fits`. ``timing``: s, how far the samples' times may be off (the noise read is at
+    least :func:`timing_noise`'s; 0: none)."""
     value, first, second, std, strained, *_ = degree_fit(
-        times, values, target, h_max, (order,), lead, derivative, lower
+        times, values, target, h_max, (order,), lead, derivative, lower, timing
     )
     return value[0], first[0], second[0], std[0], strained[0]
 
@@ -919,6 +942,7 @@ def degree_fit(
     lead: float,
     derivative: np.ndarray,
     lower: int | None = None,
+    timing: float = 0.0,
 ) -> tuple[np.ndarray, ...]:
     """:func:`adaptive_fit` at each degree of ``degrees`` (the first the highest; ``lower`` fused with
     it alone), in one C call (:func:`degree_fits`): its five, then the noise's standard deviation and
@@ -927,12 +951,12 @@ def degree_fit(
     if library is not None:
         got = native_fit.fit(
             library, times, values, target, *_ladder_and_leads(h_max, lead), degrees[0], derivative, GAMMA,
-            ROUGHNESS, _GAIN, FLOOR, GROWTH, LATTICE, lower, tuple(degrees[1:]),
+            ROUGHNESS, _GAIN, FLOOR, GROWTH, LATTICE, lower, tuple(degrees[1:]), timing,
         )  # fmt: skip
         if got is not None:
             return got
     fused_with = [lower] + [None] * (len(degrees) - 1)
-    fits = [_numpy_fit(times, values, target, h_max, degree, lead, derivative, fused)
+    fits = [_numpy_fit(times, values, target, h_max, degree, lead, derivative, fused, timing)
             for degree, fused in zip(degrees, fused_with, strict=True)]  # fmt: skip
     value, first, second, noise, strained, stated, between = (np.stack(entries) for entries in zip(*fits, strict=True))
     return value, first, second, stated, strained, noise, between
@@ -947,10 +971,11 @@ def python_adaptive_fit(
     lead: float,
     derivative: np.ndarray,
     lower: int | None = None,
+    timing: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`adaptive_fit` in numpy (two degrees fused: each fitted on its own)."""
     value, first, second, _, strained, stated, _ = _numpy_fit(times, values, target, h_max, order, lead, derivative,
-                                                              lower)  # fmt: skip
+                                                              lower, timing)  # fmt: skip
     return value, first, second, stated, strained
 
 
@@ -963,13 +988,15 @@ def _numpy_fit(
     lead: float,
     derivative: np.ndarray,
     lower: int | None,
+    timing: float = 0.0,
 ) -> tuple[np.ndarray, ...]:
     """:func:`python_adaptive_fit`'s value, first and second derivative, noise's standard deviation,
     strain, stated standard deviation and the noise's between the estimate and its neighbouring level's
     (:func:`between_std`) (n,)."""
     if lower is not None:
-        high = _numpy_fit(times, values, target, h_max, order, lead, derivative, None)
-        return fused(high, _numpy_fit(times, values, target, h_max, lower, lead, derivative, None), derivative)
+        high = _numpy_fit(times, values, target, h_max, order, lead, derivative, None, timing)
+        low = _numpy_fit(times, values, target, h_max, lower, lead, derivative, None, timing)
+        return fused(high, low, derivative)
     levels = ladder(h_max)
     leads = np.minimum(lead, levels)
     lo = times.searchsorted(target + leads - 2.0 * levels, side="left")
@@ -978,6 +1005,8 @@ def _numpy_fit(
     first = int(noise_start(times, lo[:1], hi[:1])[0])
     if first < lo[0] and hi[0] - first >= 8:  # the white noise read from more samples too: the larger
         white = np.maximum(white, noise_of(times[first : hi[0]], values[first : hi[0]])[0])
+    if timing > 0.0:
+        white = np.maximum(white, timing_noise(times[lo[0] : hi[0]], values[lo[0] : hi[0]], timing))
     counts = (hi - lo).astype(float)
     valid = counts >= order + 3
     window = values[lo[0] : hi[0]]  # the largest window holds every other level's

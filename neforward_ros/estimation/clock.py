@@ -93,11 +93,19 @@ EARLY_SAMPLES = 64
 CHECK_EVERY = 128
 """Samples between two of a :class:`SampleClock`'s checks once it has seen :data:`SPAN`."""
 EARLY_CHECK_EVERY = 32
-"""Samples between two checks before: the first checks may not tell yet (1.5 Hz sines at 100 Hz,
+"""Samples between two checks before, and on irregular stamps (:data:`JITTER`) until :data:`SPAN` samples have
+come since the first check that could tell (:data:`TELLING`): the first checks may not tell yet (1.5 Hz sines at 100 Hz,
 ``bench/bench_write_jitter.py``, on the recovered clock as it ran, before the checks read the newest
 line: 0.64 of the stamps' noise at 64 samples, 0.06 at 96; on the line 0.009 at 64). With a check every
 128 samples from the first, the default stayed on the stamps there until 1.9 s, and its error was 12x
-that at the samples' stamps (1.1x from 1 s on since the checks read the newest line)."""
+that at the samples' stamps (1.1x from 1 s on since the checks read the newest line). Counted from the start
+alone, a writer whose arm rested over its first 256 samples was checked every 128 once it moved: found 0.82 s
+after a 500 Hz arm started to move, 0.21 s since (``test/test_write_clock.py``)."""
+SOON = 8
+"""Samples after a check that could not tell (the arm at rest) from which the next is made as soon as some
+joint's speed would tell, on irregular stamps (:meth:`SampleClock._moves_to_tell`; a look where the window
+holds too few samples for a check, :data:`LOOK_SAMPLES` or more): the causal fits of a start on jittered
+stamps take their spread as timing noise until a check or look tells (:attr:`SampleClock.timing`)."""
 SILENCE = 3.0
 """An interval this many times the usual one is a silence: the samples before it are not compared with
 those after it (the differences across it are motion, not noise)."""
@@ -118,9 +126,11 @@ sample instead of 0.11 s on jittered sample stamps). The verdict outlives a rest
 wait; the bag tool's whole-recording fit holds the same targets (:func:`held_targets`). Until 2026-11-29 the
 estimates ran on the stamps meanwhile: from a start on write-time stamps (delays to 0.4 of a period, 16 bits,
 100 Hz-1 kHz), the worst error in the first second was up to 122x the steady 99th percentile for the default,
-135x kalman 20 ms (1.83x, 59x since), the cases over 3x 8 and 17 of 18 (0 and 3 since; what is left, and the
-causal settings' 369x, is a writer resting at the start that moves later, where the look at rest cannot tell:
-``bench/bench_write_jitter.py --start``)."""
+135x kalman 20 ms (1.83x, 59x since), the cases over 3x 8 and 17 of 18 (0 and 3 since; what is left is a
+writer resting at the start that moves later, where the look at rest cannot tell: ``bench/bench_write_jitter.py
+--start``). There the causal settings' 262x and 258x are 2.6x and 2.3x since their fits take the stamps'
+uncertainty into account until the clock tells (:attr:`SampleClock.timing`, :data:`SOON`); kalman 20 ms's 46x
+is left."""
 JITTER = 0.03
 """The most an interval between stamps may leave a whole number of usual intervals, as a share of one,
 for the stamps to be regular: a stream whose stamps are irregular from the start (samples stamped with
@@ -157,6 +167,8 @@ class WriteClock:
         self.holds = False
         """Whether the newest drawing found a line that holds the stamps kept (else the line is an older
         one, and the periods counted on it may be wrong: a check does not decide on it)."""
+        self.spread = 0.0
+        """s: the standard deviation of the stamps kept about the newest line that holds them (0 before one)."""
         self.jumps = 0
         """How many times the recovered clock jumped onto a line drawn on periods counted again (a holder
         that placed its samples on the line places them again: :attr:`SampleClock.placings`)."""
@@ -251,15 +263,20 @@ class WriteClock:
             return False
         line = self._drawn(usual)
         if line is not None and self._holds(line):
-            self._line, self.holds = line, True
+            self._take(line)
             return False
         if not self._recount(usual):
             return False
         line = self._drawn(usual)
         if line is None or not self._holds(line):
             return False
-        self._line, self.holds = line, True
+        self._take(line)
         return True
+
+    def _take(self, line: tuple[int, int, float]) -> None:
+        """Go on with ``line``, which holds the stamps kept."""
+        self._line, self.holds = line, True
+        self.spread = float(np.std(self._above(line))) / NS
 
     def _drawn(self, usual: float) -> tuple[int, int, float] | None:
         """(stamp, index, period ns) of the line through the stamps kept, None where it cannot be drawn or its
@@ -350,7 +367,8 @@ class SampleClock:
 
     The clock is fed every sample the fits keep, in order. Once :data:`NOISE_SAMPLES` have come since the
     start or the last silence (:data:`EARLY_SAMPLES` where they span :data:`DECISIVE_SPAN`), and then every
-    :data:`EARLY_CHECK_EVERY` samples (every :data:`CHECK_EVERY` once it has seen :data:`SPAN`), the newest
+    :data:`EARLY_CHECK_EVERY` samples (every :data:`CHECK_EVERY` once it has seen :data:`SPAN`, and where the
+    stamps are irregular, :data:`SPAN` since the first check that could tell), the newest
     ones' position noise is read on both clocks (:func:`~.adaptive.noise_of`, white). A check that can tell
     (the clock's newest drawing holds the stamps, :attr:`WriteClock.holds`; :data:`TELLING`) and finds the
     recovered clock's less than :data:`WRITTEN` of the stamps' votes for write times: after
@@ -362,7 +380,7 @@ class SampleClock:
     stream's first estimates wait until it can tell (:meth:`holds_estimates`).
     """
 
-    def __init__(self, released: bool = False) -> None:
+    def __init__(self, released: bool = False, on_stamps: bool = False) -> None:
         self.clock = WriteClock()
         self.written = False
         """Whether the stamps were found to be write times."""
@@ -373,9 +391,13 @@ class SampleClock:
         self._window: deque[tuple[int, np.ndarray]] = deque(maxlen=NOISE_SAMPLES)  # (stamp, q)
         self._unchecked = CHECK_EVERY  # samples since the last check (the first: once the window is full)
         self._seen = 0  # samples fed
+        self._telling_from: int | None = None  # samples fed at the first check that could tell
         self._kept_by = 0  # the checks that found the stamps to be the samples' times, after SPAN samples
         self._written_by = 0  # the consecutive checks that found them to be write times
         self._told = False  # whether a check (or the first look) told the stamps to be the samples' times for now
+        self._on_stamps = on_stamps  # whether a check (or look) read far less noise on them, none voting since
+        self._untold: np.ndarray | None = None  # per joint, the least noise the last check read, where it told nothing
+        self._unlooked = 0  # samples since the last check or look
         self._jittered = False  # whether an interval left whole usual intervals by more than JITTER of one
         self.released_at: int | None = 0 if released else None
         """ns: the stamp of the sample from which the stream's estimates no longer wait for this clock (0: from
@@ -409,15 +431,21 @@ class SampleClock:
         if not self.written:
             self._window.append((stamp, np.array(positions, dtype=float)))
             self._unchecked += 1
-            every = EARLY_CHECK_EVERY if self._seen < SPAN else CHECK_EVERY
+            # (irregular stamps whose checks could not tell yet, the arm at rest: as from a start)
+            untold = self._jittered and (self._telling_from is None or self._seen - self._telling_from < SPAN)
+            every = EARLY_CHECK_EVERY if self._seen < SPAN or untold else CHECK_EVERY
             self._seen += 1
-            if self._unchecked >= every and self._readable():
+            self._unlooked += 1
+            soon = self._unlooked >= SOON and self._moves_to_tell()
+            if (self._unchecked >= every or soon) and self._readable():
                 self._unchecked = 0
                 self._check()
                 if self.written:  # from now on the samples lie on the newest line (see retimed)
                     self.clock.settle()
                     recovered = self.clock.recovered
                     self.placings += 1
+            elif soon and len(self._window) >= LOOK_SAMPLES:  # too few for a check: a look (see SOON)
+                self._check(look=True)
             elif self.released_at is None and not self._told and len(self._window) == LOOK_SAMPLES:
                 self._check(look=True)  # (the first look: it never finds write times)
         if self.released_at is None:
@@ -425,6 +453,24 @@ class SampleClock:
             if self.written or self._told or regular:
                 self.released_at = stamp
         return recovered
+
+    @property
+    def on_stamps(self) -> bool:
+        """Whether the stamps were found to be the samples' times: for the rest of the stream (:attr:`kept`), or
+        by a check or look that read far less noise on them than on the line, no check since voting for write
+        times (a restart's clock starts with it: its :attr:`timing` 0)."""
+        return not self.written and (self.kept or self._on_stamps)
+
+    @property
+    def timing(self) -> float:
+        """s: how far the samples' times may be from their stamps, as far as this clock can tell yet: the
+        stamps' spread about the newest line that holds them until they are found to be write times
+        (:attr:`written`) or the samples' own (:attr:`on_stamps`); 0 once they are, or where no line holds
+        them. Either the stamps or the line is right, and the other off by about that much: the fits that
+        extrapolate to the newest sample take the noise it makes into account (:func:`~.adaptive.timing_noise`)."""
+        if self.written or self.on_stamps or not self.clock.holds:
+            return 0.0
+        return self.clock.spread
 
     def retimed(self, stamps: np.ndarray) -> np.ndarray:
         """The times (ns, float) of the samples stamped ``stamps`` (ns; samples fed, in order) on the
@@ -447,6 +493,16 @@ class SampleClock:
         holds the same targets without replaying the stream, :func:`held_targets`)."""
         return HOLD_FOR_CLOCK and (self.released_at is None or target < self.released_at)
 
+    def _moves_to_tell(self) -> bool:
+        """Whether, since the last check could not tell or found neither clock's noise far less, some joint's
+        speed over the newest :data:`SOON` samples, times the stamps' spread about the newest line, stands out
+        of the least of the noises that check read (:data:`TELLING`): an arm that rested starts to move."""
+        if self._untold is None or len(self._window) <= SOON:
+            return False
+        (first, before), (last, now) = self._window[-1 - SOON], self._window[-1]
+        speed = np.abs(now - before) * (NS / max(last - first, 1))
+        return bool((speed * self.clock.spread > TELLING * self._untold).any())
+
     def _readable(self) -> bool:
         """Whether the window holds enough samples for a check: :data:`NOISE_SAMPLES`, or
         :data:`EARLY_SAMPLES` spanning :data:`DECISIVE_SPAN`."""
@@ -460,6 +516,8 @@ class SampleClock:
         can decide: it may only find the stamps to be the samples' times, or find that it cannot tell (the
         first estimates wait no longer), never vote."""
         self._told = False
+        self._untold = None
+        self._unlooked = 0
         if not self.clock.holds:  # stamps spread beyond a writer's, or periods miscounted: see _unheld
             self._told = True
             if not look:
@@ -476,14 +534,24 @@ class SampleClock:
         # of its noise on either clock, one of the two reads that spread as noise: the check tells.
         spread = float(np.std(on_stamps - on_clock))
         speed = np.abs(values[-1] - values[0]) / (on_stamps[-1] - on_stamps[0])
-        if not (speed * spread > TELLING * np.minimum(noise, clock_noise)).any():
+        least = np.minimum(noise, clock_noise)
+        if not (speed * spread > TELLING * least).any():
             self._told = True  # (the two clocks make no difference yet)
+            self._untold = least if self._jittered else None
             return
+        if self._telling_from is None and not look:
+            self._telling_from = self._seen
         moving = noise > LEAST_NOISE
+        written = stamps_are_write_times(noise, clock_noise, moving)
+        # (the stamps read under WRITTEN of the line's noise, as the line under WRITTEN of theirs for a vote;
+        # where neither stands out, the verdict before stands)
+        self._on_stamps = not written and (self._on_stamps or stamps_are_write_times(clock_noise, noise, moving))
+        if self._jittered and not (written or self._on_stamps):  # neither clock stands out yet: soon again
+            self._untold = least
         if look:
-            self._told = not stamps_are_write_times(noise, clock_noise, moving)
+            self._told = not written
             return
-        if stamps_are_write_times(noise, clock_noise, moving):
+        if written:
             self._written_by += 1
             decisive = on_stamps[-1] >= DECISIVE_SPAN and stamps_are_write_times(noise, clock_noise, moving, DECISIVE)
             self.written = decisive or self._written_by >= WRITTEN_AFTER

@@ -58,6 +58,9 @@ NOISE_SAMPLES = 64
 NOISE_HOLE = 2.5
 """The reading reaches back to no interval longer than this many times the window's longest
 (:data:`~.adaptive.NOISE_HOLE`)."""
+TIMING_STRIDE = 4
+"""Samples apart over which a joint's speed is read for the noise its stamps' uncertainty makes
+(:data:`~.adaptive.TIMING_STRIDE`)."""
 
 WORTH_WAITING = 5000
 """Targets from which a batch waits for the build rather than fitting in numpy meanwhile."""
@@ -79,6 +82,7 @@ SOURCE = f"""
 #define HIDDEN {HIDDEN!r}  /* adaptive.HIDDEN */
 #define NOISE_SAMPLES {NOISE_SAMPLES}  /* adaptive.NOISE_SAMPLES */
 #define NOISE_HOLE {NOISE_HOLE!r}  /* adaptive.NOISE_HOLE */
+#define TIMING_STRIDE {TIMING_STRIDE}  /* adaptive.TIMING_STRIDE */
 """
 SOURCE += r"""
 #include <math.h>
@@ -380,9 +384,8 @@ static void read_white(const double *wt, const double *window, long width, long 
 static int fit_target(long count, const double *times, const double *values, long n, double target,
                       long nlevels, const double *levels, const double *leads, long order, long lower,
                       long nalso, const long *also, const long *derivative, double gamma, double roughness,
-                      double sixth_gain, double floor_, double growth, double lattice, const double *pre, long pre_lo,
-                      long pre_count,
-                      long pre_strides, double *out) {
+                      double sixth_gain, double floor_, double growth, double lattice, double timing,
+                      const double *pre, long pre_lo, long pre_count, long pre_strides, double *out) {
     long d = order + 1, lo[64], hi[64], valid = 0, valid_low = 0, valid_also[MAX_ALSO], also_at[MAX_ALSO + 1];
     if (nlevels > 64 || d > 16 || n < 1 || lower < 0 || lower >= order || nalso < 0 || nalso > MAX_ALSO) return 1;
     for (long a = 0; a < nalso; a++) {
@@ -490,6 +493,16 @@ static int fit_target(long count, const double *times, const double *values, lon
                    noise_lo - pre_lo, sixth_gain, growth, more, spread + n);
         for (long j = 0; j < n; j++) if (more[j] > white[j]) white[j] = more[j];
     }
+    if (timing > 0.0)  /* the stamps' uncertainty at the joint's fastest speed in the window (timing_noise) */
+        for (long i = 0; i + TIMING_STRIDE < width; i++) {
+            const double *a = window + i * n, *b = a + TIMING_STRIDE * n;
+            double apart = times[lo[0] + i + TIMING_STRIDE] - times[lo[0] + i];
+            if (!(apart > 0.0)) continue;
+            for (long j = 0; j < n; j++) {
+                double least = timing * fabs(b[j] - a[j]) / apart;
+                if (least > white[j]) white[j] = least;
+            }
+        }
     /* on a grid, each level's rounding errors are drawn afresh at most where the change between
        consecutive samples changes by half a step or more, TURNS (2) times those (turns_within):
        `changed` now counts the turns up to each sample of the largest window */
@@ -581,9 +594,10 @@ static int fit_target(long count, const double *times, const double *values, lon
 int adaptive_fit(long count, const double *times, const double *values, long n, double target,
                  long nlevels, const double *levels, const double *leads, long order, long lower,
                  long nalso, const long *also, const long *derivative, double gamma, double roughness,
-                 double sixth_gain, double floor_, double growth, double lattice, double *out) {
+                 double sixth_gain, double floor_, double growth, double lattice, double timing, double *out) {
     return fit_target(count, times, values, n, target, nlevels, levels, leads, order, lower, nalso, also,
-                      derivative, gamma, roughness, sixth_gain, floor_, growth, lattice, NULL, 0, 0, 0, out);
+                      derivative, gamma, roughness, sixth_gain, floor_, growth, lattice, timing, NULL, 0, 0, 0,
+                      out);
 }
 
 /* adaptive_fit at each of ntargets targets over the whole of times, values; derivative (n,); out
@@ -593,8 +607,8 @@ int adaptive_fit(long count, const double *times, const double *values, long n, 
 void adaptive_fits(long count, const double *times, const double *values, long n, long ntargets,
                    const double *targets, long nlevels, const double *levels, const double *leads,
                    long order, long lower, long nalso, const long *also, const long *derivative, double gamma,
-                   double roughness, double sixth_gain, double floor_, double growth, double lattice, double *out,
-                   int *status) {
+                   double roughness, double sixth_gain, double floor_, double growth, double lattice, double timing,
+                   double *out, int *status) {
     const long block = 256;
     for (long first = 0; first < ntargets; first += block) {
         long last = first + block < ntargets ? first + block : ntargets, lo = count, hi = 0, widest = 0;
@@ -615,7 +629,8 @@ void adaptive_fits(long count, const double *times, const double *values, long n
         for (long m = first; m < last; m++)
             status[m] = fit_target(count, times, values, n, targets[m], nlevels, levels, leads, order, lower,
                                    nalso, also, derivative, gamma, roughness, sixth_gain, floor_, growth, lattice,
-                                   pre, lo, hi - lo, pre == NULL ? 0 : strides, out + m * (1 + nalso) * 7 * n);
+                                   timing, pre, lo, hi - lo, pre == NULL ? 0 : strides,
+                                   out + m * (1 + nalso) * 7 * n);
         free(pre);
     }
 }
@@ -895,11 +910,11 @@ def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
     double, pointer, long = ctypes.c_double, ctypes.c_void_p, ctypes.c_long
     library.adaptive_fit.argtypes = [long, pointer, pointer, long, double, long, pointer, pointer, long, long,
                                      long, pointer, pointer, double, double, double, double, double, double,
-                                     pointer]  # fmt: skip
+                                     double, pointer]  # fmt: skip
     library.adaptive_fit.restype = ctypes.c_int
     library.adaptive_fits.argtypes = [long, pointer, pointer, long, long, pointer, long, pointer, pointer,
                                       long, long, long, pointer, pointer, double, double, double, double, double,
-                                      double, pointer, pointer]  # fmt: skip
+                                      double, double, pointer, pointer]  # fmt: skip
     library.adaptive_fits.restype = None
     library.causal_candidates.argtypes = [long, pointer, pointer, long, double, double, long, pointer, long, pointer,
                                           long, pointer, pointer, pointer]  # fmt: skip
@@ -936,15 +951,16 @@ def fit(
     lattice: float,
     lower: int | None = None,
     also: tuple[int, ...] = (),
+    timing: float = 0.0,
 ) -> tuple[np.ndarray, ...] | None:
     """The C function's value, first and second derivative, stated standard deviation, strain, the
     noise's standard deviation and the deviation the noise puts between the estimate and the level its
     stated deviation is measured against (D, n) each, for ``order`` and then each degree of ``also`` (D =
     1 + len(also)); None where the Python function must serve (too few samples, an order above MAX_ORDER).
     ``lower``: a second degree fused with ``order`` (:func:`neforward_ros.estimation.adaptive.fused`), in
-    the same call; ``also``: as for :func:`fits`."""
+    the same call; ``also``, ``timing``: as for :func:`fits`."""
     got = fits(library, times, values, np.array([target], dtype=float), half_widths, leads, order, derivative,
-               gamma, roughness, sixth_gain, floor, growth, lattice, lower, also)  # fmt: skip
+               gamma, roughness, sixth_gain, floor, growth, lattice, lower, also, timing)  # fmt: skip
     if got is None or not got[1][0]:
         return None
     out = got[0][0]
@@ -968,6 +984,7 @@ def fits(
     lattice: float,
     lower: int | None = None,
     also: tuple[int, ...] = (),
+    timing: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The C function at every target over the whole of ``times, values``: value, first and second
     derivative, stated standard deviation, strain, the noise's standard deviation and the deviation it
@@ -975,7 +992,8 @@ def fits(
     for ``order`` and each further
     degree of ``also`` (each below ``order``, with its own windows chosen: the numbers of a call at that
     degree alone), and whether each target was done (M,) (where not, the Python function must serve);
-    None above MAX_ORDER. ``lower``: as for :func:`fit`."""
+    None above MAX_ORDER. ``lower``: as for :func:`fit`. ``timing``: s, how far the samples' times may be from
+    their stamps (:func:`~.adaptive.timing_noise`; 0: none)."""
     if order > MAX_ORDER or (lower is not None and not 0 < lower < order):
         return None
     if len(also) > MAX_ALSO or any(not 0 < degree < order for degree in also):
@@ -997,7 +1015,7 @@ def fits(
                               targets[part].ctypes.data, len(half_widths), half_widths.ctypes.data,
                               leads.ctypes.data, order, lower or 0, len(also), degrees.ctypes.data,
                               derivative.ctypes.data, gamma, roughness,
-                              sixth_gain, floor, growth, lattice, out[part].ctypes.data,
+                              sixth_gain, floor, growth, lattice, timing, out[part].ctypes.data,
                               status[part].ctypes.data)  # fmt: skip
 
     # Each target is fitted on its own (the C function keeps nothing from one to the next), and a

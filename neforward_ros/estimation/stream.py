@@ -207,6 +207,8 @@ class StreamingEstimator:
         self._recordless = np.ones(len(self.joint_names), dtype=bool)
         # per joint, whether a clock of a group it left had let estimates through (clock.HOLD_FOR_CLOCK)
         self._clock_released = np.zeros(len(self.joint_names), dtype=bool)
+        # per joint, whether that clock had found the stamps to be the samples' times (SampleClock.timing)
+        self._clock_on_stamps = np.zeros(len(self.joint_names), dtype=bool)
         chosen = self.settings.method == "polyfit" and self.settings.adaptive and self.settings.order is None
         # kalman with the bank: its models join the fits' candidates for the same delay, chosen alike
         self._joined = self.settings.method == "kalman" and self.settings.kalman.length_scale == 0
@@ -418,7 +420,7 @@ class StreamingEstimator:
             self._watch_innovations(group)
         if fresh:
             released = bool(self._clock_released[sorted(fresh)].all())  # (a restart: clock.HOLD_FOR_CLOCK)
-            clock, track = SampleClock(released), None
+            clock, track = SampleClock(released, bool(self._clock_on_stamps[sorted(fresh)].all())), None
             if self._kalman:  # what was read of the noise before a restart serves until it is read again
                 known = self._noise_memory[sorted(fresh)]
                 noise = tuple(float(known[:, i].max()) if np.isfinite(known[:, i]).all() else None for i in range(2))
@@ -470,10 +472,13 @@ class StreamingEstimator:
 
     def _remember_clock(self, group: JointHistory, joints: list[int]) -> None:
         """As these joints leave the group (a restart): whether its clock had let estimates through, which
-        their next group's clock starts with (clock.HOLD_FOR_CLOCK)."""
+        their next group's clock starts with (clock.HOLD_FOR_CLOCK), and whether it had found the stamps to be
+        the samples' times (a driver stamps the same way after a time reset or a gap: SampleClock.timing)."""
         clock = group.sample_clock
         if clock is not None and clock.released_at is not None:
             self._clock_released[joints] = True
+        if clock is not None:
+            self._clock_on_stamps[joints] = clock.on_stamps
 
     def _split(self, group: JointHistory, joints: list[int]) -> JointHistory:
         moved = group.split(joints)
@@ -627,7 +632,8 @@ class StreamingEstimator:
             got = np.stack(options[:5])[:, chosen, np.arange(m)]  # each entry at each joint's chosen degree
             got = (*got[:3], std, got[4] > 0.5)
         else:
-            fit = adaptive_fit(times, values, target_s, half, settings.degree, lead, derivative, settings.lower_degree)
+            fit = adaptive_fit(times, values, target_s, half, settings.degree, lead, derivative, settings.lower_degree,
+                               _timing(group, lead))  # fmt: skip
             got = _per_joint(fit, m, by_velocity, exact)
         if group.track is None:  # (the bank's joints are watched by their innovations)
             strained = np.array(got[4], dtype=bool)
@@ -748,7 +754,7 @@ class StreamingEstimator:
             rule = bank
         else:
             rule = adaptive_fit(times, values, target_s, self.settings.window / 2.0, self.settings.degree, 0.0,
-                                derivative)  # fmt: skip
+                                derivative, timing=_timing(group, 0.0))  # fmt: skip
         theirs = np.where(derivative == 2, rule[2], rule[1])
         self._rule_last[joints] = theirs
         # the rule's deviation, or where larger its root mean square over the last half window's checks (one
@@ -987,6 +993,16 @@ def _columns(states: np.ndarray, by_velocity: np.ndarray) -> tuple[np.ndarray, n
     first = np.where(by_velocity, states[..., 2, :], states[..., 1, :])
     second = np.where(by_velocity, np.nan, states[..., 2, :])
     return value, first, second
+
+
+def _timing(group: JointHistory, lead: float) -> float:
+    """s: how far a causal fit's samples' times may be off (:attr:`~.clock.SampleClock.timing`): 0 for a fit
+    whose windows reach past the target. Those are centred where the motion's change shows on both sides,
+    and held from a start on write times after a rest (the default within 1.8x of its steady 99th
+    percentile, ``bench/bench_write_jitter.py --start``); the whole-recording fit (the bag tool's for the
+    default) has no clock running as it fits."""
+    clock = group.sample_clock
+    return clock.timing if clock is not None and lead == 0.0 else 0.0
 
 
 def _per_joint(fit: tuple[np.ndarray, ...], m: int, by_velocity: np.ndarray, exact: bool) -> tuple[np.ndarray, ...]:
