@@ -97,15 +97,17 @@ def test_strays_mixed_into_a_good_stream_change_no_good_estimate(settings: Strea
 
 def test_a_real_time_reset_restarts_within_a_few_samples(monkeypatch) -> None:
     """A looped recording: the stream goes on from an earlier time; with the causal choice's records
-    forgotten at a restart and no start waiting for them (as until 2026-11-29), the estimates of the second
-    pass are those of a fresh estimator fed the second pass alone. As it is, the records outlive the restart
-    and the second pass has estimates at the same stamps as then: no wait for a record after a restart."""
+    forgotten at a restart and no start waiting for them (as until 2026-11-29), and the stamps' verdict not
+    carried over, the estimates of the second pass are those of a fresh estimator fed the second pass alone.
+    As it is, the records outlive the restart and the second pass has estimates at the same stamps as then: no
+    wait for a record after a restart."""
     from neforward_ros.estimation import stream as stream_module
 
     first, second = good_stream(300), good_stream(300, seed=2)
     kept = [e for e in run(StreamSettings(mode="causal"), first + second) if e.segment == 1 and e.all_ready]
     monkeypatch.setattr(stream_module, "CARRY_RECORDS", False)
     monkeypatch.setattr(stream_module, "HOLD_UNTIL_RECORD", False)
+    monkeypatch.setattr(stream_module, "CARRY_STAMPS_VERDICT", False)
     log = LogRecorder()
     out = run(StreamSettings(mode="causal"), first + second, log)
     fresh = run(StreamSettings(mode="causal"), second)

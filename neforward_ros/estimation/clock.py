@@ -446,8 +446,9 @@ class SampleClock:
                     self.placings += 1
             elif soon and len(self._window) >= LOOK_SAMPLES:  # too few for a check: a look (see SOON)
                 self._check(look=True)
-            elif self.released_at is None and not self._told and len(self._window) == LOOK_SAMPLES:
-                self._check(look=True)  # (the first look: it never finds write times)
+            elif not self._told and len(self._window) == LOOK_SAMPLES:
+                # (the first look, released or not: it never finds write times; it may find the samples' own)
+                self._check(look=True)
         if self.released_at is None:
             regular = not self._jittered and len(self._intervals) >= REGULAR_AFTER
             if self.written or self._told or regular:
@@ -543,9 +544,11 @@ class SampleClock:
             self._telling_from = self._seen
         moving = noise > LEAST_NOISE
         written = stamps_are_write_times(noise, clock_noise, moving)
-        # (the stamps read under WRITTEN of the line's noise, as the line under WRITTEN of theirs for a vote;
-        # where neither stands out, the verdict before stands)
-        self._on_stamps = not written and (self._on_stamps or stamps_are_write_times(clock_noise, noise, moving))
+        # (the stamps read under WRITTEN of the line's noise, as the line under WRITTEN of theirs for a vote, on
+        # the joints that read noise on the line: exact samples read none on their stamps; where neither stands
+        # out, the verdict before stands)
+        own = stamps_are_write_times(clock_noise, noise, clock_noise > LEAST_NOISE)
+        self._on_stamps = not written and (self._on_stamps or own)
         if self._jittered and not (written or self._on_stamps):  # neither clock stands out yet: soon again
             self._untold = least
         if look:

@@ -87,6 +87,11 @@ estimates waiting for their scores are dropped. Forgotten until 2026-11-29, when
 the rule's served until a new record held: up to 7.5x the steady 99th percentile in the second after a time
 reset at 100 Hz (``bench/bench_transients.py``). Where the stamps are found to be write times the records
 made on them are still forgotten (they scored fits on the wrong times)."""
+CARRY_STAMPS_VERDICT = True
+"""A restart's clock starts with the verdict before it that the stamps are the samples' own times
+(:attr:`~.clock.SampleClock.on_stamps`): a driver stamps the same way after a time reset or a gap, and the
+causal fits would take the stamps' spread as timing noise again until a check tells
+(:attr:`~.clock.SampleClock.timing`)."""
 NO_RECORD_BY_DEVIATION = True
 """kalman: a joint without a record and not in a start's warm-up (:data:`HOLD_UNTIL_RECORD`; its record
 forgotten, or unfair) gets the bank's own estimate or the rule's for the same delay, whichever states the
@@ -477,7 +482,7 @@ class StreamingEstimator:
         clock = group.sample_clock
         if clock is not None and clock.released_at is not None:
             self._clock_released[joints] = True
-        if clock is not None:
+        if clock is not None and CARRY_STAMPS_VERDICT:
             self._clock_on_stamps[joints] = clock.on_stamps
 
     def _split(self, group: JointHistory, joints: list[int]) -> JointHistory:
