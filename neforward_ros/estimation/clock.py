@@ -141,7 +141,8 @@ LOOK_SAMPLES = 40
 """Samples at which a stream waiting for its clock (:meth:`SampleClock.holds_estimates`) has a first look,
 whatever their span, before a check can decide: the recovered clock's line is drawn by then
 (:data:`FIRST`), and a stream stamped at its jittered samples reads several times more noise on it than on
-its stamps, a writer a few hundredths of it (``test/test_write_clock.py``)."""
+its stamps, a writer a few hundredths of it (``test/test_write_clock.py``). A clock that lets estimates through
+from the start (a restart's) has it too: it may find the stamps to be the samples' own (:attr:`SampleClock.timing`)."""
 REGULAR_AFTER = 8
 """Intervals between stamps seen (the first four tell the usual one) before stamps none of which was off by
 :data:`JITTER` are taken to be regular."""
