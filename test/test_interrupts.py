@@ -122,12 +122,14 @@ def before_handler(output: str) -> bool:
 
 def interpreter_start(code: int, output: str) -> bool:
     """Whether the signal ended the interpreter's own start-up, before the package's handler was in
-    (silently, in site's imports, or with Python's own KeyboardInterrupt while runpy looks for the
-    module or the package's first lines import what installs the handler)."""
+    (silently, in site's imports, as the interpreter imports runpy itself: "Could not import runpy module",
+    exit status 1, seen once in CI with every core busy, or with Python's own KeyboardInterrupt while runpy
+    looks for the module or the package's first lines import what installs the handler)."""
     before_package = "neforward_ros/" not in output
     return (
         (code == -signal.SIGINT and output.strip() == "")
         or (code == 1 and "Fatal Python error: init_import_site" in output and before_package)
+        or (code in (1, -signal.SIGINT) and "Could not import runpy module" in output and before_package)
         or (code in (1, -signal.SIGINT) and "KeyboardInterrupt" in output and "<frozen runpy>" in output
             and before_handler(output))
     )  # fmt: skip
@@ -202,6 +204,12 @@ SEEN_AT_START = """Traceback (most recent call last):
 KeyboardInterrupt
 """
 
+SEEN_IMPORTING_RUNPY = """Could not import runpy module
+Traceback (most recent call last):
+  File "<frozen importlib._bootstrap>", line 1165, in _find_and_load
+KeyboardInterrupt
+"""
+
 
 def test_only_a_traceback_before_the_handler_counts_as_the_interpreters() -> None:
     """Python's KeyboardInterrupt while the package's first lines run (seen in CI, 2026-11-26) is the
@@ -211,6 +219,9 @@ def test_only_a_traceback_before_the_handler_counts_as_the_interpreters() -> Non
     assert not interpreter_start(1, later)
     handler = SEEN_AT_START.replace("line 10, in <module>", "line 16, in interrupted_early")
     assert not interpreter_start(1, handler)
+    runpy = SEEN_IMPORTING_RUNPY
+    assert interpreter_start(1, runpy)  # (CI, 2026-11-29: the signal as the interpreter imported runpy)
+    assert not interpreter_start(1, runpy.replace("<frozen importlib._bootstrap>", "/x/neforward_ros/cli.py"))
 
 
 CTRL_C_IN_A_FINALIZER = """
