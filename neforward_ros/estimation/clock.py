@@ -147,8 +147,9 @@ REGULAR_AFTER = 8
 """Intervals between stamps seen (the first four tell the usual one) before stamps none of which was off by
 :data:`JITTER` are taken to be regular."""
 LEAST_NOISE = 1e-6
-"""rad (m): a joint whose positions read less noise than this on the stamps is not compared on the two
-clocks (it rests, or its samples are exact)."""
+"""rad (m): a joint whose positions read less noise than this on the clock a comparison is made against (the
+stamps, or the line where the question is whether the stamps are the samples' own) is not compared on the two
+clocks (it rests, or its samples are exact: :func:`stamps_are_write_times`)."""
 
 
 class WriteClock:
@@ -351,12 +352,13 @@ def _shortest_arcs(cycles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return arcs, start + 0.5 * arcs
 
 
-def stamps_are_write_times(
-    on_stamps: np.ndarray, on_clock: np.ndarray, moving: np.ndarray, share: float = WRITTEN
-) -> bool:
+def stamps_are_write_times(on_stamps: np.ndarray, on_clock: np.ndarray, share: float = WRITTEN) -> bool:
     """Whether the position noise read on the recovered clock (per joint, ``on_clock``) is far less than
-    that read on the stamps (``on_stamps``): the median over the ``moving`` joints, under ``share``
-    (:data:`WRITTEN` unless told) of it."""
+    that read on the stamps (``on_stamps``): the median over the joints that read more than
+    :data:`LEAST_NOISE` on the stamps, under ``share`` (:data:`WRITTEN` unless told) of it. With the two
+    swapped: whether the stamps read far less than the line (compared on the joints that read noise on the
+    line: exact samples read none on their stamps)."""
+    moving = on_stamps > LEAST_NOISE
     if not moving.any():
         return False
     return bool(np.median(on_clock[moving]) < share * np.median(on_stamps[moving]))
@@ -543,12 +545,10 @@ class SampleClock:
             return
         if self._telling_from is None and not look:
             self._telling_from = self._seen
-        moving = noise > LEAST_NOISE
-        written = stamps_are_write_times(noise, clock_noise, moving)
-        # (the stamps read under WRITTEN of the line's noise, as the line under WRITTEN of theirs for a vote, on
-        # the joints that read noise on the line: exact samples read none on their stamps; where neither stands
-        # out, the verdict before stands)
-        own = stamps_are_write_times(clock_noise, noise, clock_noise > LEAST_NOISE)
+        written = stamps_are_write_times(noise, clock_noise)
+        # (the stamps read under WRITTEN of the line's noise, as the line under WRITTEN of theirs for a vote;
+        # where neither stands out, the verdict before stands)
+        own = stamps_are_write_times(clock_noise, noise)
         self._on_stamps = not written and (self._on_stamps or own)
         if self._jittered and not (written or self._on_stamps):  # neither clock stands out yet: soon again
             self._untold = least
@@ -557,7 +557,7 @@ class SampleClock:
             return
         if written:
             self._written_by += 1
-            decisive = on_stamps[-1] >= DECISIVE_SPAN and stamps_are_write_times(noise, clock_noise, moving, DECISIVE)
+            decisive = on_stamps[-1] >= DECISIVE_SPAN and stamps_are_write_times(noise, clock_noise, DECISIVE)
             self.written = decisive or self._written_by >= WRITTEN_AFTER
             return
         self._written_by = 0
