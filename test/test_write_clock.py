@@ -411,3 +411,67 @@ def test_the_timing_uncertainty_is_the_writers_spread_until_the_clock_can_tell(b
             assert written[-1] and not timing[written > 0].any()
         else:
             assert not written.any() and not timing[40:].any()
+
+
+@pytest.mark.parametrize("net", [False, True], ids=["path", "net speed (planted)"])
+def test_a_joint_swinging_back_and_forth_tells_the_stamps_apart(net: bool, monkeypatch) -> None:
+    """5 Hz sines at 100 Hz through 12 bits, stamped at their samples (+-5 % jitter: the estimator family's):
+    the joints move 5-11 rad/s, their samples' motion over the stamps' spread about the line (0.27 ms) several
+    times their noise, and the first look finds the stamps to be the samples' times (timing 0 from 0.4 s on).
+    The planted bug: the checks weigh the joints' net speed over their samples (``clock.path_speed`` as it was
+    until 2026-11-30), which nets little over a swing; the clock never told, and the timing uncertainty stayed
+    for good."""
+    from motion_family import make
+
+    from neforward_ros.estimation import clock
+
+    if net:
+        monkeypatch.setattr(clock, "path_speed", lambda t, q: np.abs(q[-1] - q[0]) / (t[-1] - t[0]))
+    t, q, _, _ = make("sines5", 100.0, 12, 100, 4.0)
+    sample_clock = clock.SampleClock()
+    timing = []
+    for stamp, positions in zip(t.tolist(), q, strict=True):
+        sample_clock.add(EPOCH_NS + round(stamp * 1e9), positions)
+        timing.append(sample_clock.timing)
+    told = not np.any(np.array(timing)[t >= 0.5])
+    assert told != net, max(timing)
+
+
+@pytest.mark.parametrize("noise", [True, False], ids=["timing noise", "without (planted)"])
+def test_a_kalman_20_ms_start_on_write_stamps_after_a_rest(noise: bool, monkeypatch) -> None:
+    """From a start on a 500 Hz writer's stamps, its arm at rest at first (minimum-jerk moves): until the clock
+    can tell, the Kalman bank's position noise is at least what the stamps' spread about the clock's line makes
+    at the joints' speed (``kalman_bank.BANK_TIMING_NOISE``): the worst error in the first second 2.3x kalman
+    20 ms's steady 99th percentile. The planted bug: the noise read alone, mostly over the rest (5.9x)."""
+    from neforward_ros.estimation import kalman_bank
+
+    monkeypatch.setattr(kalman_bank, "BANK_TIMING_NOISE", noise)
+    ratio, _ = _start_over_steady(StreamSettings(method="kalman"), 500.0, "minjerk", 302)
+    assert (ratio <= 3.0) if noise else (ratio > 4.0), ratio
+
+
+@pytest.mark.parametrize("looks", [True, False], ids=["decisive looks", "without (planted)"])
+@pytest.mark.parametrize("seed", [300, 302])
+def test_a_50_hz_writer_at_rest_at_the_start_is_found_by_a_look(looks: bool, seed: int, monkeypatch) -> None:
+    """A 50 Hz writer whose arm rests at the start: once it moves, a look (the window still too small for a check,
+    40-63 samples, here over 0.8 s) that reads under a fifth of the stamps' noise on the line finds write times
+    alone, as a check over half a second does (``clock.DECISIVE_LOOKS``): found 0.32 and 0.38 s after the move
+    started. The planted bug: only checks decide (0.80 and 0.86 s; a look voted for nothing until 2026-11-30)."""
+    from bench_write_jitter import case
+
+    from neforward_ros.estimation import clock
+
+    monkeypatch.setattr(clock, "DECISIVE_LOOKS", looks)
+    t, measured, _, written = case("minjerk", 50.0, 0.4, 16, seed, 3.0)
+    moved = int(np.flatnonzero(np.any(measured != measured[0], axis=1))[0])
+    stamps = EPOCH_NS + np.round(written * 1e9).astype(np.int64)
+    found = clock.written_from(stamps, measured, np.zeros(len(stamps), dtype=bool))
+    assert found is not None
+    after = t[found] - t[moved]
+    assert (after <= 0.5) if looks else (after > 0.7), after
+    # found by a look as by a check, the clock goes onto the line at that sample (its holders place their samples)
+    sample_clock = clock.SampleClock()
+    for stamp, positions in zip(stamps[: found + 1].tolist(), measured, strict=False):
+        recovered = sample_clock.add(stamp, positions)
+    assert sample_clock.written and sample_clock.placings == 1
+    assert abs(recovered - sample_clock.retimed(np.array([stamp]))[0]) < 1e3, recovered - stamp

@@ -87,6 +87,17 @@ Over shorter spans real stamps can read far less (the Panda at 1 kHz down to 0.0
 0.05 over 128, fed from 250 starts): there only checks in a row tell."""
 DECISIVE_SPAN = 0.5
 """s: the least span of samples over which one check may find write times alone (:data:`DECISIVE`)."""
+DECISIVE_LOOKS = True
+"""A look (over fewer samples than a check reads: :data:`SOON`, :data:`LOOK_SAMPLES`) that spans
+:data:`DECISIVE_SPAN` and reads under :data:`DECISIVE` of the stamps' noise on the line finds write times as such
+a check does; until 2026-11-30 a look never voted for them. At 50-125 Hz a writer whose arm rests at the start
+is looked at every :data:`SOON` samples once it moves, before a check can be made: 50 Hz writers (minimum-jerk
+moves, 16 bits) were found 0.32-0.56 s after the move started instead of 0.80-1.04 s
+(``test_write_clock.py``); at 100 Hz, kalman 20 ms's worst error in the first second of one such start was 3.3
+times its steady 99th percentile instead of 13.7 (``bench/bench_write_jitter.py --start``). No stamps of the
+samples' own times were taken for write times by it: the Panda's recording from 250 starts at 1 kHz, and
+thinned to 100 and 50 Hz, 470 starts spread over the UR10e recordings, and 432 simulated streams stamped at
+their jittered samples (50-125 Hz, jitter 5-20 % of a period, 12-20 bits, sines, gaits, minimum-jerk moves)."""
 EARLY_SAMPLES = 64
 """Samples the first check may read, before :data:`NOISE_SAMPLES` have come, where they span
 :data:`DECISIVE_SPAN` (128 Hz or less): a 100 Hz writer is then found by about 0.6-1 s, not 2 s."""
@@ -113,9 +124,9 @@ KEEP_AFTER = 4
 """Checks (after the first :data:`SPAN` samples, each able to tell: :data:`TELLING`) that must find the
 stamps to be the samples' times for a stream to keep them for good."""
 TELLING = 2.0
-"""A check tells the two clocks apart where, for some joint, its net speed over the check's samples
-times the stamps' spread about the recovered clock is at least this many times the least of the noises
-its positions read on the two clocks (whichever clock is wrong reads that spread as noise). A joint at
+"""A check tells the two clocks apart where, for some joint, its mean speed over the check's samples
+(:func:`path_speed`) times the stamps' spread about the recovered clock is at least this many times the least of
+the noises its positions read on the two clocks (whichever clock is wrong reads that spread as noise). A joint at
 rest, or one creeping through its encoder's rounding, does not tell: a driver that stamps when it writes
 is not kept on its stamps for having started at rest."""
 HOLD_FOR_CLOCK = True
@@ -130,7 +141,7 @@ estimates ran on the stamps meanwhile: from a start on write-time stamps (delays
 writer resting at the start that moves later, where the look at rest cannot tell: ``bench/bench_write_jitter.py
 --start``). There the causal settings' 262x and 258x are 2.6x and 2.3x since their fits take the stamps'
 uncertainty into account until the clock tells (:attr:`SampleClock.timing`, :data:`SOON`); kalman 20 ms's 46x
-is left."""
+is 3.3x since the Kalman bank's does too (:data:`~.kalman_bank.BANK_TIMING_NOISE`, :data:`DECISIVE_LOOKS`)."""
 JITTER = 0.03
 """The most an interval between stamps may leave a whole number of usual intervals, as a share of one,
 for the stamps to be regular: a stream whose stamps are irregular from the start (samples stamped with
@@ -352,6 +363,17 @@ def _shortest_arcs(cycles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return arcs, start + 0.5 * arcs
 
 
+def path_speed(times: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Each joint's mean speed (n,) over samples (k, n) at ``times`` (k,; s): the length of its path over their span.
+    Its net speed (first to last sample) was used until 2026-11-30: a joint that swings back and forth over a
+    check's samples (5 Hz sines at 100 Hz) nets little, its checks never told, and a stream stamped at its
+    jittered samples stayed undecided for good, its fits and filters hedging against write times (their
+    :attr:`SampleClock.timing`). An encoder's flicker at rest, or its rounding's steps at about one a sample,
+    makes a path of at most about 1.2 of its noise a sample: times a writer's spread (under 0.35 of a period),
+    well under :data:`TELLING` of the noise."""
+    return np.add.reduce(np.abs(np.diff(values, axis=0)), axis=0) / (times[-1] - times[0])
+
+
 def stamps_are_write_times(on_stamps: np.ndarray, on_clock: np.ndarray, share: float = WRITTEN) -> bool:
     """Whether the position noise read on the recovered clock (per joint, ``on_clock``) is far less than
     that read on the stamps (``on_stamps``): the median over the joints that read more than
@@ -443,15 +465,16 @@ class SampleClock:
             if (self._unchecked >= every or soon) and self._readable():
                 self._unchecked = 0
                 self._check()
-                if self.written:  # from now on the samples lie on the newest line (see retimed)
-                    self.clock.settle()
-                    recovered = self.clock.recovered
-                    self.placings += 1
             elif soon and len(self._window) >= LOOK_SAMPLES:  # too few for a check: a look (see SOON)
                 self._check(look=True)
             elif not self._told and len(self._window) == LOOK_SAMPLES:
-                # (the first look, released or not: it never finds write times; it may find the samples' own)
+                # (the first look, released or not: it may find the samples' own times, and write times only
+                # where it is decisive: DECISIVE_LOOKS)
                 self._check(look=True)
+            if self.written:  # found now: from now on the samples lie on the newest line (see retimed)
+                self.clock.settle()
+                recovered = self.clock.recovered
+                self.placings += 1
         if self.released_at is None:
             regular = not self._jittered and len(self._intervals) >= REGULAR_AFTER
             if self.written or self._told or regular:
@@ -516,9 +539,10 @@ class SampleClock:
         return held >= EARLY_SAMPLES and self._window[-1][0] - self._window[0][0] >= DECISIVE_SPAN * NS
 
     def _check(self, look: bool = False) -> None:
-        """A check of the window (see the class docstring). With ``look``, the first look, before a check
-        can decide: it may only find the stamps to be the samples' times, or find that it cannot tell (the
-        first estimates wait no longer), never vote."""
+        """A check of the window (see the class docstring). With ``look``, a look over fewer samples (the
+        first, or one made :data:`SOON`): it may find the stamps to be the samples' times, or find that it cannot
+        tell (the first estimates wait no longer), and it votes for write times only where it decides alone
+        (:data:`DECISIVE_LOOKS`)."""
         self._told = False
         self._untold = None
         self._unlooked = 0
@@ -537,7 +561,7 @@ class SampleClock:
         # Where the stamps' spread about the recovered clock, moved at the joint's speed, would stand out
         # of its noise on either clock, one of the two reads that spread as noise: the check tells.
         spread = float(np.std(on_stamps - on_clock))
-        speed = np.abs(values[-1] - values[0]) / (on_stamps[-1] - on_stamps[0])
+        speed = path_speed(on_stamps, values)
         least = np.minimum(noise, clock_noise)
         if not (speed * spread > TELLING * least).any():
             self._told = True  # (the two clocks make no difference yet)
@@ -552,12 +576,12 @@ class SampleClock:
         self._on_stamps = not written and (self._on_stamps or own)
         if self._jittered and not (written or self._on_stamps):  # neither clock stands out yet: soon again
             self._untold = least
-        if look:
+        decisive = written and on_stamps[-1] >= DECISIVE_SPAN and stamps_are_write_times(noise, clock_noise, DECISIVE)
+        if look and not (DECISIVE_LOOKS and decisive):
             self._told = not written
             return
         if written:
             self._written_by += 1
-            decisive = on_stamps[-1] >= DECISIVE_SPAN and stamps_are_write_times(noise, clock_noise, DECISIVE)
             self.written = decisive or self._written_by >= WRITTEN_AFTER
             return
         self._written_by = 0

@@ -47,7 +47,7 @@ from collections import deque
 import numpy as np
 
 from neforward_ros.estimation import native_fit, native_kalman
-from neforward_ros.estimation.adaptive import noise_of
+from neforward_ros.estimation.adaptive import TIMING_STRIDE, noise_of
 from neforward_ros.estimation.clock import SILENCE, SampleClock, median_of_few
 from neforward_ros.estimation.kalman import KalmanTrack
 from neforward_ros.estimation.motion import TICK_NS, KalmanSettings, MotionModel, MotionModels, interval
@@ -85,6 +85,17 @@ step's time went back by the stamps' mean delay to the line: from a start on wri
 0.4 of a period, 16 bits, the estimates held until the clock told), the worst error in the first second was
 20-121x the steady 99th percentile for kalman 20 ms at 100 Hz and 10-43x for kalman causal at 1 kHz on
 sines and a gait, 0.86-1.47x and 1.05-1.20x replayed (``test/test_write_clock.py``)."""
+BANK_TIMING_NOISE = True
+"""Until the clock tells whether the stamps are the samples' times (:attr:`~.clock.SampleClock.timing` above 0),
+the position noise is at least what the stamps' uncertainty makes at the joints' speed now
+(:meth:`_timing_variance`), as the causal fits' is (:func:`~.adaptive.timing_noise`). Read from the samples, the
+noise of a writer whose arm rested at the start is the rest's, and from the move's start until the clock finds
+write times the filters took the write delays' motion for the joints' own: kalman 20 ms's worst error in the first
+second up to 46 times its steady 99th percentile (minimum-jerk moves at 100 Hz through 16 bits), 9.6 and 6.7
+times at 500 Hz; with it 13.7, 3.2 and 2.8 (``bench/bench_write_jitter.py --start``; 3.3 at 100 Hz with
+:data:`~.clock.DECISIVE_LOOKS`). Tried on 2026-11-29 without the clock telling a swinging joint's stamps
+(:func:`~.clock.path_speed`), it held the family's 5 Hz sines at 100 Hz through 12 bits, stamped at their
+jittered samples, on the stamps' uncertainty for good: 0.52 -> 1.69 times hindsight's error."""
 UNCLOCKED = 256
 """Samples held for :data:`REPLAY_ON_CLOCK` until the clock tells (the newest; a stream kept on its stamps
 holds none)."""
@@ -531,6 +542,19 @@ class KalmanBank:
             usual = median_of_few(self._intervals) if len(self._intervals) >= 4 else None
             self._step(stamp, time, positions, velocities, False, usual)
 
+    def _timing_variance(self, timing: float) -> float:
+        """The position variance the stamps' uncertainty (``timing``, s) makes now: ``timing`` times each joint's
+        speed over the newest :data:`~.adaptive.TIMING_STRIDE` samples, squared, the median over the joints that
+        moved (the bank's noise is the group's; the causal fits take the fastest speed in their window:
+        :func:`~.adaptive.timing_noise`)."""
+        (before, _, then), (now, _, newest) = self._positions[-1 - TIMING_STRIDE], self._positions[-1]
+        moved = np.abs(newest - then)
+        moving = moved[moved > 0.0]
+        if not len(moving) or now <= before:
+            return 0.0
+        moving *= timing / (now - before)
+        return _median_of(moving * moving)
+
     def _retime_noise_samples(self) -> None:
         """The samples kept for the noise, placed on the recovered clock's line (:meth:`~.clock.SampleClock.retimed`);
         the noise is read afresh on them at the next sample."""
@@ -554,6 +578,9 @@ class KalmanBank:
         if settings.noise == 0:
             self._positions.append((seconds, on_clock, np.asarray(positions, dtype=float).copy()))
             noise = self._noise("positions", self._positions, FALLBACK_NOISE)
+            timing = self.clock.timing
+            if BANK_TIMING_NOISE and timing > 0.0 and len(self._positions) > TIMING_STRIDE:
+                noise = max(noise, self._timing_variance(timing))
             self.track._noise = noise
         if settings.velocity_noise == 0 and math.isfinite(np.add.reduce(velocities)):
             self._velocities.append((seconds, on_clock, np.asarray(velocities, dtype=float).copy()))
