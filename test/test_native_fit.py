@@ -157,6 +157,49 @@ def test_further_degrees_from_one_call_are_each_degrees_own_numbers() -> None:
         np.testing.assert_array_equal(one[6], whole[5][:, i])  # and the noise's between it and its neighbour
 
 
+def test_the_finer_fit_is_the_rules_next_smaller_window_in_c_and_numpy_and_node_and_bag() -> None:
+    """The default's reference (``finer``): the first degree's fit at the next smaller window than its
+    rule chose. C and numpy take the same level (the same strain, the rule's) and agree to rounding; the
+    others from the same call are unchanged; the whole recording's are bitwise the node's."""
+    lib = library()
+    rng = np.random.default_rng(77)
+    shifted = 0
+    for _ in range(400):
+        t, y, target, h, order, _, lead, derivative, still = window(rng)
+        if order < 4:
+            continue
+        ladder = adaptive._ladder_and_leads(h, lead)
+        constants = (adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._GAIN, adaptive.FLOOR, adaptive.GROWTH,
+                     adaptive.LATTICE)  # fmt: skip
+        got = native_fit.fit(lib, t, y, target, *ladder, order, derivative, *constants, None, (3,), 0.0, True)
+        plain = native_fit.fit(lib, t, y, target, *ladder, order, derivative, *constants, None, (3,))
+        assert got is not None and plain is not None and got[0].shape == (3, len(derivative))
+        for k in range(7):  # the rule's own fits, after the finer one, are those of a call without it
+            np.testing.assert_array_equal(got[k][1:], plain[k])
+        want = adaptive._numpy_fit(t, y, target, h, order, lead, derivative, None, finer=True)
+        np.testing.assert_array_equal(got[4][0], want[4])  # the rule's strain
+        moving = slice(1, None) if still else slice(None)
+        for k in (0, 1, 2):
+            scale = np.abs(want[k]) + want[3] * h ** (2 - k) + 1e-5 * np.abs(y).max(axis=0) / h**k
+            error = np.abs(got[k][0] - want[k])[moving] / scale[moving]
+            assert np.all(error <= (2e-6 if lead < 0.05 else 5e-8)), (k, order, lead, error.max())
+        np.testing.assert_allclose(got[5][0], want[3], rtol=1e-6)  # a smaller window's noise
+        shifted += int(np.count_nonzero(got[5][0] > got[5][1]))
+    assert shifted > 0  # a noisier, smaller window somewhere
+    count, n = 3000, 3
+    t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
+    y = np.sin(3 * t[:, None] * np.arange(1, n + 1)) + rng.normal(0.0, 1e-4, (count, n))
+    whole = adaptive.degree_fits(t, y, t, 0.1, (6, 4, 3), 0.1, finer=True)
+    assert whole[0].shape == (4, count, n) and np.any(whole[2][0] != whole[2][1])
+    for i in range(60, count - 60, 53):
+        lo, hi = np.searchsorted(t, t[i] - 0.1), np.searchsorted(t, t[i] + 0.1, side="right")
+        one = adaptive.degree_fit(t[lo:hi], y[lo:hi], t[i], 0.1, (6, 4, 3), 0.1, np.full(n, 2), finer=True)
+        for k in range(4):
+            np.testing.assert_array_equal(one[k], whole[k][:, i])
+        np.testing.assert_array_equal(one[5], whole[4][:, i])
+        np.testing.assert_array_equal(one[6], whole[5][:, i])
+
+
 def test_targets_with_too_few_samples_take_numpy_and_no_compiler_takes_numpy_everywhere(monkeypatch) -> None:
     library()
     rng = np.random.default_rng(6)

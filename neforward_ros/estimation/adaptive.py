@@ -478,14 +478,21 @@ def between_std(valid: np.ndarray, chosen: np.ndarray, stds: np.ndarray) -> np.n
     return np.where(found, np.sqrt(np.abs(theirs * theirs - own * own)), 0.0)
 
 
+def finer_level(valid: np.ndarray, chosen: np.ndarray) -> np.ndarray:
+    """The next smaller valid level than ``chosen`` (...) among ``valid`` (L, ...), or ``chosen`` where
+    it is the smallest valid one."""
+    below = np.minimum(chosen + 1, len(valid) - 1)
+    return np.where((below > chosen) & np.take_along_axis(valid, below[None], 0)[0], below, chosen)
+
+
 def _neighbour(valid: np.ndarray, chosen: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The level (1, ...) whose estimate :func:`stated_std` measures the chosen one's distance to: the
     next smaller valid one, else the next larger; and whether there is one (...)."""
-    below = np.minimum(chosen + 1, len(valid) - 1)[None]
-    smaller = (below[0] > chosen) & np.take_along_axis(valid, below, 0)[0]
+    below = finer_level(valid, chosen)
+    smaller = below > chosen
     above = np.maximum(chosen - 1, 0)[None]
     larger = ~smaller & (above[0] < chosen) & np.take_along_axis(valid, above, 0)[0]
-    return np.where(smaller, below[0], above[0])[None], smaller | larger
+    return np.where(smaller, below, above[0])[None], smaller | larger
 
 
 PRECISION = 1e4
@@ -596,6 +603,11 @@ class StampedRows:
     def window(self) -> np.ndarray:
         """The rows kept (rows, *shape), the newest last: a view, to be written in place."""
         return self._rows[self._first : self._end]
+
+    @property
+    def held_ns(self) -> int:
+        """The span of the rows kept, ns: from the oldest's stamp to the newest's (0 with none)."""
+        return int(self._stamps[self._end - 1] - self._stamps[self._first]) if self._end > self._first else 0
 
 
 class DeviationPool:
@@ -780,33 +792,43 @@ def degree_fits(
     lead: float,
     derivative: int = 2,
     lower: int | None = None,
+    finer: bool = False,
 ) -> tuple[np.ndarray, ...]:
     """:func:`adaptive_fits` at each degree of ``degrees`` (the first the highest; ``lower`` fused with
     it alone), each with its own windows chosen, in one C call: the power sums and the noise reading
     shared, the numbers those of one call per degree to rounding. Value, first and second derivative,
     the derivative's stated standard deviation, its noise's (the chosen window's fit's own, without the
     distance to the neighbouring window's) and the noise's between the two (:func:`between_std`); the
-    last two are the degree choice's (:mod:`.degree_choice`). Each (D, M, n)."""
+    last two are the degree choice's (:mod:`.degree_choice`). Each (D, M, n); where ``finer``, the first
+    degree's fit at the next smaller window than its rule's comes first (D = 1 + len(degrees))."""
     library = native_fit.FIT.get(wait=len(targets) >= native_fit.WORTH_WAITING)
     columns = np.full(y.shape[1], derivative)
     got = None if library is None else native_fit.fits(library, t, y, targets, *_ladder_and_leads(h_max, lead),
                                                        degrees[0], columns, GAMMA, ROUGHNESS, _GAIN, FLOOR, GROWTH,
-                                                       LATTICE, lower, tuple(degrees[1:]))  # fmt: skip
-    fused_with = [lower] + [None] * (len(degrees) - 1)
+                                                       LATTICE, lower, tuple(degrees[1:]), finer=finer)  # fmt: skip
+    candidates = _candidates(degrees, lower, finer)
     if got is None:
-        fits = [_numpy_fits(t, y, targets, h_max, degree, lead, derivative, fused)
-                for degree, fused in zip(degrees, fused_with, strict=True)]  # fmt: skip
+        fits = [_numpy_fits(t, y, targets, h_max, degree, lead, derivative, fused, shifted)
+                for degree, fused, shifted in candidates]  # fmt: skip
         value, first, second, noise, stated, between = (np.stack(entries) for entries in zip(*fits, strict=True))
         return value, first, second, stated, noise, between
     out, done = got
     value, first, second, stated, noise, between = (out[:, :, q].transpose(1, 0, 2) for q in (0, 1, 2, 3, 5, 6))
     rest = np.flatnonzero(~done)  # too few samples in a target's largest window: numpy's fits serve there
-    for k, (degree, fused) in enumerate(zip(degrees, fused_with, strict=True)):
+    for k, (degree, fused, shifted) in enumerate(candidates):
         if len(rest):
-            numpy_fits = _numpy_fits(t, y, targets[rest], h_max, degree, lead, derivative, fused)
+            numpy_fits = _numpy_fits(t, y, targets[rest], h_max, degree, lead, derivative, fused, shifted)
             for whole, part in zip((value, first, second, noise, stated, between), numpy_fits, strict=True):
                 whole[k, rest] = part
     return value, first, second, stated, noise, between
+
+
+def _candidates(degrees: tuple[int, ...], lower: int | None, finer: bool) -> list[tuple[int, int | None, bool]]:
+    """:func:`degree_fits`' fits in its order: (degree, the lower degree fused with it, whether at the next
+    smaller window than the rule's)."""
+    fused_with = [lower] + [None] * (len(degrees) - 1)
+    ours = [(degree, fused, False) for degree, fused in zip(degrees, fused_with, strict=True)]
+    return [(degrees[0], None, True), *ours] if finer else ours
 
 
 def python_adaptive_fits(
@@ -833,10 +855,13 @@ def _numpy_fits(
     lead: float,
     derivative: int,
     lower: int | None,
+    finer: bool = False,
 ) -> tuple[np.ndarray, ...]:
     """:func:`python_adaptive_fits` with the noise's standard deviation before the stated one: value,
     first and second derivative, noise's and stated standard deviation, and the noise's between the
-    estimate and its neighbouring level's (:func:`between_std`) (M, n)."""
+    estimate and its neighbouring level's (:func:`between_std`) (M, n); ``finer`` (not with ``lower``): at
+    the next smaller window than the rule's (:func:`finer_level`), where the noise was read off
+    :data:`NOISE_SAMPLES` samples at least (else the rule's own)."""
     if lower is not None:
         high = _numpy_fits(t, y, targets, h_max, order, lead, derivative, None)
         return fused(high, _numpy_fits(t, y, targets, h_max, lower, lead, derivative, None), derivative)
@@ -854,7 +879,7 @@ def _numpy_fits(
     for start in range(0, len(targets), BLOCK):  # a block of targets at a time: its levels stay in cache
         part = slice(start, start + BLOCK)
         chosen = _block_fits(t, y, targets[part], levels, order, lead, derivative, white[part], step[part], changed,
-                             turned)  # fmt: skip
+                             turned, finer and hi[part] - first[part] >= NOISE_SAMPLES)  # fmt: skip
         for whole, level in zip(out, chosen, strict=True):
             whole[part] = level
     return tuple(out)
@@ -872,13 +897,15 @@ def _block_fits(
     step: np.ndarray,
     changed: np.ndarray,
     turned: np.ndarray,
+    finer: bool | np.ndarray = False,
 ) -> list[np.ndarray]:
     """:func:`adaptive_fits` for a block of targets, with their windows' noise: value, first and
     second derivative, the chosen derivative's noise's and stated standard deviation (:func:`stated_std`)
     and the noise's between it and its neighbouring level's (:func:`between_std`) (M, n). Levels whose
     window is too small at every target of the block are not fitted. ``changed``, ``turned``: y's
     :func:`changes_up_to` and :func:`turns`; a window's rounding errors are counted as the fewer of its
-    changes and its turns."""
+    changes and its turns. ``finer`` (M,) or one for all: at the next smaller window than the rule's
+    (:func:`finer_level`) at those targets (where the noise was read off :data:`NOISE_SAMPLES` at least)."""
     needed = order + 3
     fits = []
     changes = []
@@ -899,6 +926,7 @@ def _block_fits(
     ])  # fmt: skip
     valid = np.broadcast_to(valid, estimates.shape)
     chosen, _ = select(estimates, stds, valid)
+    chosen = np.where(np.reshape(finer, (-1, 1)), finer_level(valid, chosen), chosen)
     pick = chosen[None]
     picked = [np.take_along_axis(np.stack([f[i] for f in fits]), pick, 0)[0] for i in range(3)]
     noise = np.take_along_axis(stds, pick, 0)[0]
@@ -943,21 +971,22 @@ def degree_fit(
     derivative: np.ndarray,
     lower: int | None = None,
     timing: float = 0.0,
+    finer: bool = False,
 ) -> tuple[np.ndarray, ...]:
     """:func:`adaptive_fit` at each degree of ``degrees`` (the first the highest; ``lower`` fused with
     it alone), in one C call (:func:`degree_fits`): its five, then the noise's standard deviation and
-    the noise's between the estimate and its neighbouring level's (:func:`degree_fits`), each (D, n)."""
+    the noise's between the estimate and its neighbouring level's (:func:`degree_fits`), each (D, n);
+    ``finer``: as for :func:`degree_fits`."""
     library = native_fit.FIT.get()
     if library is not None:
         got = native_fit.fit(
             library, times, values, target, *_ladder_and_leads(h_max, lead), degrees[0], derivative, GAMMA,
-            ROUGHNESS, _GAIN, FLOOR, GROWTH, LATTICE, lower, tuple(degrees[1:]), timing,
+            ROUGHNESS, _GAIN, FLOOR, GROWTH, LATTICE, lower, tuple(degrees[1:]), timing, finer,
         )  # fmt: skip
         if got is not None:
             return got
-    fused_with = [lower] + [None] * (len(degrees) - 1)
-    fits = [_numpy_fit(times, values, target, h_max, degree, lead, derivative, fused, timing)
-            for degree, fused in zip(degrees, fused_with, strict=True)]  # fmt: skip
+    fits = [_numpy_fit(times, values, target, h_max, degree, lead, derivative, fused, timing, shifted)
+            for degree, fused, shifted in _candidates(degrees, lower, finer)]  # fmt: skip
     value, first, second, noise, strained, stated, between = (np.stack(entries) for entries in zip(*fits, strict=True))
     return value, first, second, stated, strained, noise, between
 
@@ -989,10 +1018,13 @@ def _numpy_fit(
     derivative: np.ndarray,
     lower: int | None,
     timing: float = 0.0,
+    finer: bool = False,
 ) -> tuple[np.ndarray, ...]:
     """:func:`python_adaptive_fit`'s value, first and second derivative, noise's standard deviation,
     strain, stated standard deviation and the noise's between the estimate and its neighbouring level's
-    (:func:`between_std`) (n,)."""
+    (:func:`between_std`) (n,); ``finer`` (not with ``lower``): at the next smaller window than the rule's
+    (:func:`finer_level`), the strain the rule's, where the noise was read off :data:`NOISE_SAMPLES` samples
+    at least (else the rule's own window)."""
     if lower is not None:
         high = _numpy_fit(times, values, target, h_max, order, lead, derivative, None, timing)
         low = _numpy_fit(times, values, target, h_max, lower, lead, derivative, None, timing)
@@ -1034,14 +1066,16 @@ def _numpy_fit(
     smallest = max(int(np.count_nonzero(valid)) - 1, 0)  # the windows are nested: valid ones come first
     centred = window - np.add.reduce(window, axis=0) * (1.0 / len(window))
     spread = np.sqrt(np.einsum("ij,ij->j", centred, centred) * (1.0 / len(window)))  # the samples' deviation
-    rough = white > ROUGHNESS * spread
+    strained = ((chosen == smallest) & (smallest > 0)) | (white > ROUGHNESS * spread)
+    if finer and hi[0] - first >= NOISE_SAMPLES:  # (a noise read off fewer samples: the rule's own window)
+        chosen = finer_level(usable, chosen)
     noise = stds[chosen, columns]
     return (
         value[chosen, columns],
         d1[chosen, columns],
         d2[chosen, columns],
         noise,
-        ((chosen == smallest) & (smallest > 0)) | rough,
+        strained,
         stated_std(estimates, usable, chosen, noise),
         between_std(usable, chosen, stds),
     )

@@ -220,17 +220,20 @@ def _chosen_block(
     velocity: np.ndarray | None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """:func:`chosen_degree_fits` of one block of targets, with ``counted`` (M, m)."""
-    degrees = degree_choice.DEGREES
-    options = degree_fits(t, q, targets, half_width, degrees, half_width)  # each (D, M, m)
+    degrees, finer = degree_choice.DEGREES, degree_choice.FINER
+    options = degree_fits(t, q, targets, half_width, degrees, half_width, finer=finer)  # each (D, M, m)
     if velocity is not None:
-        value, first, _, *deviations = degree_fits(t, velocity, targets, half_width, degrees, half_width, derivative=1)
+        value, first, _, *deviations = degree_fits(t, velocity, targets, half_width, degrees, half_width, derivative=1,
+                                                   finer=finer)  # fmt: skip
         options = (options[0], value, first, *deviations)
     library = native_fit.FIT.get()
     if library is not None:
         chosen, std = native_fit.choose_degrees(library, stamps_ns, round(degree_choice.MEMORY * NS), options[2],
                                                 *options[3:], counted, degree_choice.LEAST, GAMMA,
-                                                degree_choice.STRAIN)  # fmt: skip
+                                                degree_choice.STRAIN, finer, degree_choice.WHITE,
+                                                round(degree_choice.RECORD * NS))  # fmt: skip
     else:
-        chosen, std = degree_choice.choose(stamps_ns, *(np.where(counted, option, np.nan) for option in options[2:]))
+        chosen, std = degree_choice.choose(stamps_ns, *(np.where(counted, option, np.nan) for option in options[2:]),
+                                           finer=finer)  # fmt: skip
     q_at, qd_at, qdd_at = (degree_choice.pick(entries, chosen) for entries in options[:3])
     return q_at, qd_at, qdd_at, std

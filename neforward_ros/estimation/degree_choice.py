@@ -7,7 +7,8 @@ windows short: 2-3x the error). Joining two degrees estimate by estimate (the lo
 agree within the rule's intervals) let degree 4's bias through where degree 6 was right: one
 estimate's difference between degrees is one draw of the noise. Over a second of estimates it is not.
 
-Each estimate runs the rule at every degree of :data:`DEGREES`: 6, 4 and 3. (3, not 2: in a window
+Each estimate runs the rule at every degree of :data:`DEGREES`: 6, 4 and 3 (and takes degree 6 at one
+window finer too: below). (3, not 2: in a window
 symmetric about the estimate the two give the same q'', but jittered stamps and dropped repeats make
 windows lopsided, and there degree 2 takes the motion's third derivative into q'': up to 2x hindsight
 on slow sines at 100 Hz with repeats, where degree 3 gives 1.0-1.2x.) For two of them, a lower
@@ -35,6 +36,30 @@ noise read off its samples is 2-3x below the estimates' spread), and then degree
 c is read from the reference's same second: the sum of its squared distances to its next smaller
 window (s_r^2 - v_r^2) over the sum of what the noise read would put there (w_r^2, the difference of
 the two windows' noise variances: :func:`~.adaptive.between_std`), at least 1.
+
+Degree 6 is also fitted at the next smaller window than its rule chose (:data:`FINER`;
+:func:`~.adaptive.finer_level`): the rule's intervals, G = 4 deviations wide, keep windows whose bias
+reaches several deviations, and where a motion's higher derivatives are large for its rate (a gait at
+100-250 Hz) the next smaller window, with about an eighth of the bias and 2-3x the noise, is the better
+estimate, which the rule does not take (on a 12-bit gait at 100 Hz the rule's degree 6 alone gives 2.0x
+hindsight, the finer fit 0.84x). The degrees are chosen among themselves as above; then the finer fit takes
+the place of the one chosen where the scores say it is the better: the chosen one's mean squared error over
+degree 6's (its score less degree 6's) plus degree 6's over the finer's. The latter is their mean squared
+step less twice the difference of their noise variances (the rule's window holds the finer's, at the same
+degree: its fit is the better linear one there, and the step is uncorrelated with it), at the colour the
+finer fit reads off its distance to its own next smaller window. That colour must be white, at most
+:data:`WHITE`: a coloured noise grows with the window (the Panda's measured velocities read 5 at the finer
+window and 10 at the rule's), so the step to the rule's fit, at the finer's colour, reads the noise's growth
+as the rule's bias; let in there, the finer fit was taken at 19-48 % of the Panda's estimates and its torque
+error went to 1.11x the reference's (0.95x without it). White noise and encoders' rounding read 0.05-1.2 on
+the benches' families.
+
+The finer fit is also left out where its record is short (under :data:`LEAST` estimates, or spanning under
+:data:`RECORD`: after a start or a restart its gain is read off a few steps' noise), where its stated
+deviation is over :data:`STRAIN` times its usual error (its window cut short now), as a degree's strain is,
+and where it is the rule's own window (the rule chose its smallest, or the fit read its noise off fewer than
+:data:`~.adaptive.NOISE_SAMPLES` samples: after a gap, the few since, which can read it 2.3x under an
+encoder's rounding, and the finer fit's step to the rule's looked like bias).
 
 The record tells each degree's usual error; one estimate can be far from usual. Where the chosen
 degree's stated deviation is over :data:`STRAIN` (G) times the root of its mean squared error over the
@@ -67,7 +92,18 @@ from neforward_ros.estimation.adaptive import GAMMA, StampedRows, window_sums
 from neforward_ros.stamps import NS
 
 DEGREES = (6, 4, 3)
-"""The degrees the default fit chooses among, the reference (the least biased) first."""
+"""The degrees the default fit chooses among, the highest (the least biased) first."""
+FINER = True
+"""Whether the highest degree's fit at the next smaller window than its rule chose is a candidate too,
+before the degrees' own fits (see the module's docstring)."""
+WHITE = 2.0
+"""The most colour the finer fit may read (its squared distances to its neighbouring window over what the
+noise read puts there, over the last second) for it to be a candidate (see the module's docstring)."""
+RECORD = 0.75
+"""s: the least span of the last second's estimates for the finer fit to be a candidate. After a start or a
+restart, records of a tenth of a second (:data:`LEAST` estimates at 250 Hz-1 kHz) took it on their few
+steps' noise: on the transients bench up to 3.4x the steady p99 in the second after a time reset, where
+the degrees' choice alone gives 2.5x; with half a second, 2.26x at 100 Hz (1.23x without the finer fit)."""
 MEMORY = 1.0
 """s: the estimates a choice is made on (stamps in (s - MEMORY, s])."""
 STRAIN = GAMMA
@@ -89,9 +125,10 @@ def terms(
     deviations finite), from the degrees' accelerations, stated deviations, noise's deviations and the
     noise's deviations between each estimate and its neighbouring window's (D, ...), the reference
     first: each degree's squared step from the one before, (a_k - a_(k-1))^2 (0 for the reference),
-    then v_a^2 for each, then the reference's squared distance to
-    its neighbour, s_r^2 - v_r^2 (at least 0), and what its noise alone puts there, w_r^2; and 1 or 0
-    alike for each. Two (2 D + 2, ...), the terms 0 where not counted."""
+    then v_a^2 for each, then the reference's squared distance to its neighbour, s_r^2 - v_r^2 (at
+    least 0), and what its noise alone puts there, w_r^2, then the same two of the second degree (the
+    first's where there is one); and 1 or 0 alike for each. Two (2 D + 4, ...), the terms 0 where not
+    counted."""
     accelerations, stated, noise, between = (
         np.asarray(x, dtype=float) for x in (accelerations, stated, noise, between)
     )
@@ -101,10 +138,12 @@ def terms(
     steps = np.concatenate([np.zeros_like(accelerations[:1]), np.diff(accelerations, axis=0)])
     apart = np.where(finite, steps, 0.0)
     own = np.where(finite, noise, 0.0)
-    reference = np.where(finite, stated[0], 0.0)
-    beside = np.maximum(reference * reference - own[0] * own[0], 0.0)
-    expected = np.where(finite, between[0], 0.0)
-    rows = np.concatenate([apart * apart, own * own, beside[None], (expected * expected)[None]])
+    colours = []
+    for k in (0, 1) if len(accelerations) > 1 else (0, 0):
+        reference = np.where(finite, stated[k], 0.0)
+        expected = np.where(finite, between[k], 0.0)
+        colours += [np.maximum(reference * reference - own[k] * own[k], 0.0), expected * expected]
+    rows = np.concatenate([apart * apart, own * own, np.stack(colours)])
     return rows, np.broadcast_to(finite, rows.shape).astype(float)
 
 
@@ -115,14 +154,58 @@ def _least(
     stated: np.ndarray,
     noise: np.ndarray,
     between: np.ndarray,
+    finer: bool = False,
+    held: np.ndarray | float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The degree index (..., n) with the least mean score and the standard deviation stated with its
-    estimate (..., n), from the sums of :func:`terms` over the window (``total`` (..., 2 D + 2, n), the
+    estimate (..., n), from the sums of :func:`terms` over the window (``total`` (..., 2 D + 4, n), the
     terms' axis the second to last) and the estimates counted (``count`` (..., K, n), its first entry
     along that axis the count), and this estimate's accelerations, stated deviations, noise's
     deviations and those between each and its neighbour (D, ..., n). The reference's where fewer than
     :data:`LEAST` counted, or where the degree's estimate leaves the reference's by more than
-    :data:`~.adaptive.GAMMA` of their combined stated deviations."""
+    :data:`~.adaptive.GAMMA` of their combined stated deviations.
+
+    ``finer``: the first is the finer fit. The others are chosen among themselves as above, the second
+    their reference and its colour read; the finer fit takes the place of the one chosen where its own
+    colour reads at most :data:`WHITE`, its record is long enough (``held``, the window's span in s (...,
+    or one for all), at least :data:`RECORD`, and :data:`LEAST` estimates), its stated deviation is within
+    :data:`STRAIN` of its usual error, and the scores say it is the better: the chosen one's mean
+    squared error over the reference's (its score less the reference's) plus the reference's over the
+    finer's (their mean squared step less twice the difference of their mean noise variances at the
+    colour the finer's window reads) above 0."""
+    degrees = len(accelerations)
+    if not finer or degrees < 2:
+        return _least_from(total, count, accelerations, stated, noise, between)[:2]
+    zero = np.zeros_like(total[..., :1, :])  # the others' sums: the step to the second (from the first) left out
+    theirs = np.concatenate([zero, total[..., 2:degrees, :], total[..., degrees + 1 : 2 * degrees, :],
+                             total[..., 2 * degrees + 2 :, :]], axis=-2)  # fmt: skip
+    chosen, std, score, colour = _least_from(theirs, count, accelerations[1:], stated[1:], noise[1:], between[1:])
+    number = np.maximum(count[..., 0, :], 1.0)
+    beside, expected = total[..., 2 * degrees, :], total[..., 2 * degrees + 1, :]
+    reading = np.where(expected > 0.0, beside / np.where(expected > 0.0, expected, 1.0), 1.0)
+    tint = np.maximum(reading, 1.0)
+    mine, rule = total[..., degrees, :] / number, total[..., degrees + 1, :] / number
+    gain = score - 2.0 * colour * rule + total[..., 1, :] / number - 2.0 * tint * (mine - rule)
+    finest, quiet, apart = stated[0], noise[0], between[0]
+    other = (accelerations[0] != accelerations[1]) | (noise[0] != noise[1])  # (not the rule's smallest window)
+    aged = np.asarray(held)[..., None] >= RECORD
+    take = (count[..., 0, :] >= LEAST) & aged & (reading <= WHITE) & (gain > 0.0) & other
+    take &= finest * finest <= STRAIN**2 * tint * mine
+    beyond = np.maximum(finest * finest - quiet * quiet - tint * apart * apart, 0.0)
+    own = np.sqrt(np.maximum(tint * quiet * quiet + beyond, tint * mine))
+    return np.where(take, 0, chosen + 1), np.where(take, own, std)
+
+
+def _least_from(
+    total: np.ndarray,
+    count: np.ndarray,
+    accelerations: np.ndarray,
+    stated: np.ndarray,
+    noise: np.ndarray,
+    between: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_least` with the first degree the reference, its colour read from ``total``'s rows 2 D and
+    2 D + 1: the degree index and the deviation stated, then the chosen one's score and the colour."""
     degrees = len(accelerations)
     number = np.maximum(count[..., :1, :], 1.0)
     counted = count[..., 0, :] >= LEAST
@@ -150,19 +233,28 @@ def _least(
     coloured, expected = colour * own * own, colour * np.square(pick(between, chosen))
     beyond_own = np.maximum(spread * spread - own * own - expected, 0.0)
     beyond_reference = np.maximum(np.square(estimate - accelerations[0]) - colour * np.square(noise[0]), 0.0)
-    return chosen, np.sqrt(np.maximum(coloured + beyond_own + beyond_reference, error))
+    return chosen, np.sqrt(np.maximum(coloured + beyond_own + beyond_reference, error)), least, colour
 
 
 def choose(
-    stamps_ns: np.ndarray, accelerations: np.ndarray, stated: np.ndarray, noise: np.ndarray, between: np.ndarray
+    stamps_ns: np.ndarray,
+    accelerations: np.ndarray,
+    stated: np.ndarray,
+    noise: np.ndarray,
+    between: np.ndarray,
+    finer: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The degree index chosen at each estimate (M, n) and the standard deviation stated with it
     (M, n), from every degree's accelerations, stated deviations, noise's deviations and those between
     each and its neighbouring window (D, M, n) at the estimates' stamps (M,), integer ns, increasing
-    (NaN where a joint has no estimate: it does not count) (:func:`_least`)."""
+    (NaN where a joint has no estimate: it does not count) (:func:`_least`; ``finer``: the first is the
+    finer fit)."""
     rows, counted = terms(accelerations, stated, noise, between)
-    total, count = window_sums(stamps_ns, rows.transpose(1, 0, 2), counted.transpose(1, 0, 2), round(MEMORY * NS))
-    return _least(total, count, accelerations, stated, noise, between)
+    span = round(MEMORY * NS)
+    total, count = window_sums(stamps_ns, rows.transpose(1, 0, 2), counted.transpose(1, 0, 2), span)
+    stamps_ns = np.asarray(stamps_ns, dtype=np.int64)
+    held = (stamps_ns - stamps_ns[np.searchsorted(stamps_ns, stamps_ns - span, side="right")]) / NS
+    return _least(total, count, accelerations, stated, noise, between, finer, held)
 
 
 def pick(options: np.ndarray, chosen: np.ndarray) -> np.ndarray:
@@ -181,13 +273,15 @@ class DegreePool:
     last second's score terms are kept and summed directly at each choice (in C once compiled,
     :func:`~.native_fit.choose_last`; the whole recording's sliding sums agree to about 1e-12)."""
 
-    def __init__(self, joints: int) -> None:
+    def __init__(self, joints: int, candidates: int | None = None) -> None:
         # the last second's estimates: their terms (terms), then whether counted
-        self._rows = StampedRows(round(MEMORY * NS), (2 * len(DEGREES) + 3, joints))
-        self._accelerations = np.zeros((len(DEGREES), joints))  # the estimate begun's
-        self._stated = np.zeros((len(DEGREES), joints))
-        self._noise = np.zeros((len(DEGREES), joints))
-        self._between = np.zeros((len(DEGREES), joints))
+        self._finer = FINER
+        options = len(DEGREES) + self._finer if candidates is None else candidates
+        self._rows = StampedRows(round(MEMORY * NS), (2 * options + 5, joints))
+        self._accelerations = np.zeros((options, joints))  # the estimate begun's
+        self._stated = np.zeros((options, joints))
+        self._noise = np.zeros((options, joints))
+        self._between = np.zeros((options, joints))
         self._counted = np.zeros(joints, dtype=np.uint8)
 
     def clear(self) -> None:
@@ -233,9 +327,13 @@ class DegreePool:
                 LEAST,
                 GAMMA,
                 STRAIN,
+                self._finer,
+                WHITE,
+                self._rows.held_ns >= round(RECORD * NS),
             )
             return chosen[joints], std[joints]
         rows, counted = terms(accelerations, stated, noise, between)
         window[-1, :-1, joints], window[-1, -1, joints] = rows.T, counted[0]
         total = np.add.reduce(window[:, :, joints], axis=0)
-        return _least(total[:-1], total[-1:], accelerations, stated, noise, between)
+        return _least(total[:-1], total[-1:], accelerations, stated, noise, between, self._finer,
+                      self._rows.held_ns / NS)  # fmt: skip

@@ -252,16 +252,40 @@ static int level_fit(const double *sums, const double *moments, long n, long ord
     return level_fits(sums, moments, n, 1, &order, &wanted, &fit, h, h0, derivative) >= order + 1;
 }
 
+/* Column j of level `level`'s fit among the `valid` levels' fits (valid, n, 5) into out (7, n): value, first
+   and second derivative, stated standard deviation (its noise and the distance to the next smaller valid
+   level's estimate in quadrature; where it is the smallest, to the next larger one's), `strained`, its noise's
+   standard deviation and the deviation that noise alone puts between the two estimates. */
+static void emit(const double *fits, long valid, long n, long j, long level, long derivative, int strained,
+                 double *out) {
+    const double *fit = fits + (level * n + j) * 5;
+    for (long k = 0; k < 4; k++) out[k * n + j] = fit[k];
+    out[6 * n + j] = 0.0;
+    long other = level + 1 < valid ? level + 1 : level - 1;
+    if (other >= 0) {
+        const double *neighbour = fits + (other * n + j) * 5;
+        long k = derivative == 2 ? 2 : 1;
+        double apart = fit[k] - neighbour[k];
+        out[3 * n + j] = sqrt(fit[3] * fit[3] + apart * apart);
+        out[6 * n + j] = sqrt(fabs(neighbour[3] * neighbour[3] - fit[3] * fit[3]));
+    }
+    out[4 * n + j] = strained ? 1.0 : 0.0;
+    out[5 * n + j] = fit[3];
+}
+
 /* The ICI rule over the `valid` levels' fits (valid, n, 5) of one degree, into out (7, n): value,
    first and second derivative, stated standard deviation (see stated_std in adaptive.py), strained,
    the chosen level's noise's standard deviation (also into noise (n,)), and the deviation that noise
    alone puts between its estimate and the other level's that the stated one measures the distance to
    (the root of the difference of their variances; 0 where there is none: see between_std in
    adaptive.py). changes (levels, n): how many times each column's samples change within each level's
-   window. */
+   window. finer (7, n) or NULL: the same for the next smaller valid level than the chosen one (the
+   chosen where it is the smallest, or where not shift: the noise read off too few samples), its strain the
+   rule's. */
 static void choose(double *fits, long valid, long n, const long *lo, const long *hi, const double *changes,
                    const long *derivative, const double *white, const double *step, const double *spread,
-                   double gamma, double roughness, double floor_, double *out, double *noise) {
+                   double gamma, double roughness, double floor_, double *out, double *noise, double *finer,
+                   int shift) {
     for (long j = 0; j < n; j++) {
         double low_run = -INFINITY, high_run = INFINITY;
         long chosen = -1;
@@ -283,24 +307,13 @@ static void choose(double *fits, long valid, long n, const long *lo, const long 
         }
         for (long l = 0; l < valid && chosen < 0; l++) if (meets[l]) chosen = l;
         if (chosen < 0) chosen = 0;
-        double *fit = fits + (chosen * n + j) * 5;
         long smallest_level = valid - 1;
         int strained = (chosen == smallest_level && smallest_level > 0) || white[j] > roughness * spread[j];
-        for (long k = 0; k < 4; k++) out[k * n + j] = fit[k];
-        noise[j] = fit[3];
-        out[6 * n + j] = 0.0;
-        /* the distance to the next smaller window's estimate, in quadrature; where the smallest was
-           chosen, to the next larger one's */
-        long other = chosen + 1 < valid ? chosen + 1 : chosen - 1;
-        if (other >= 0) {
-            const double *neighbour = fits + (other * n + j) * 5;
-            long k = derivative[j] == 2 ? 2 : 1;
-            double apart = fit[k] - neighbour[k];
-            out[3 * n + j] = sqrt(fit[3] * fit[3] + apart * apart);
-            out[6 * n + j] = sqrt(fabs(neighbour[3] * neighbour[3] - fit[3] * fit[3]));
-        }
-        out[4 * n + j] = strained ? 1.0 : 0.0;
-        out[5 * n + j] = noise[j];
+        emit(fits, valid, n, j, chosen, derivative[j], strained, out);
+        noise[j] = out[5 * n + j];
+        /* the next smaller window's (the rule's strain is this one's too) */
+        if (finer != NULL)
+            emit(fits, valid, n, j, shift && chosen + 1 < valid ? chosen + 1 : chosen, derivative[j], strained, finer);
     }
 }
 
@@ -383,11 +396,12 @@ static void read_white(const double *wt, const double *window, long width, long 
    pre_count), covering this target's largest window and its noise_reach, or NULL: computed here. */
 static int fit_target(long count, const double *times, const double *values, long n, double target,
                       long nlevels, const double *levels, const double *leads, long order, long lower,
-                      long nalso, const long *also, const long *derivative, double gamma, double roughness,
-                      double sixth_gain, double floor_, double growth, double lattice, double timing,
-                      const double *pre, long pre_lo, long pre_count, long pre_strides, double *out) {
+                      long nalso, const long *also, long finer, const long *derivative, double gamma,
+                      double roughness, double sixth_gain, double floor_, double growth, double lattice,
+                      double timing, const double *pre, long pre_lo, long pre_count, long pre_strides, double *out) {
     long d = order + 1, lo[64], hi[64], valid = 0, valid_low = 0, valid_also[MAX_ALSO], also_at[MAX_ALSO + 1];
     if (nlevels > 64 || d > 16 || n < 1 || lower < 0 || lower >= order || nalso < 0 || nalso > MAX_ALSO) return 1;
+    if (finer < 0 || finer > 1) return 1;
     for (long a = 0; a < nalso; a++) {
         if (also[a] < 1 || also[a] >= order) return 1;
         valid_also[a] = 0;
@@ -562,10 +576,10 @@ static int fit_target(long count, const double *times, const double *values, lon
     for (long a = 0; a < nalso; a++) if (valid_also[a] == 0) status = 1;
     if (status == 0) {
         choose(fits, valid, n, lo, hi, changes, derivative, white, step, spread, gamma, roughness, floor_, out,
-               noise);
+               noise, finer ? out + (1 + nalso) * 7 * n : NULL, hi[0] - noise_lo >= NOISE_SAMPLES);
         if (valid_low > 0) {
             choose(fits_low, valid_low, n, lo, hi, changes, derivative, white, step, spread, gamma, roughness,
-                   floor_, out_low, noise_low);
+                   floor_, out_low, noise_low, NULL, 0);
             for (long j = 0; j < n; j++) {  /* fused: the lower degree where it agrees and is the quieter */
                 long k = derivative[j] == 2 ? 2 : 1;
                 double apart = fabs(out_low[k * n + j] - out[k * n + j]);
@@ -576,7 +590,7 @@ static int fit_target(long count, const double *times, const double *values, lon
         }
         for (long a = 0; a < nalso; a++)  /* each further degree's own choice, not fused */
             choose(fits_also + also_at[a] * n * 5, valid_also[a], n, lo, hi, changes, derivative, white, step, spread,
-                   gamma, roughness, floor_, out + (a + 1) * 7 * n, noise_low);
+                   gamma, roughness, floor_, out + (a + 1) * 7 * n, noise_low, NULL, 0);
     }
     free(scratch);
     return status;
@@ -585,30 +599,32 @@ static int fit_target(long count, const double *times, const double *values, lon
 /* See adaptive_fit in neforward_ros/estimation/adaptive.py. times (count,), values (count, n)
    row-major; levels, leads (nlevels,) the half-widths (largest first) and their leads; order the
    polynomial degree and lower a second, lower degree fused with it (see fused in adaptive.py; 0: none),
-   both fitted from the same power sums and noise reading; derivative (n,) 2 or 1. out (1 + nalso, 7, n),
-   for order and then each degree of also: value, first and second derivative, the chosen derivative's
-   stated standard deviation, strained (1 or 0), its noise's standard deviation and the deviation that
-   noise puts between it and the level the stated one is measured against (see choose). Returns
+   both fitted from the same power sums and noise reading; derivative (n,) 2 or 1. out (1 + nalso + finer, 7,
+   n), for order, then each degree of also, then (finer 1) order's fit at the next smaller window than its
+   rule's: value, first and second derivative, the chosen derivative's stated standard deviation, strained
+   (1 or 0), its noise's standard deviation and the deviation that noise puts between it and the level the
+   stated one is measured against (see choose). Returns
    0 when done, 1 when the largest window is too small (the caller's function serves), 2 when memory
    runs out. */
 int adaptive_fit(long count, const double *times, const double *values, long n, double target,
                  long nlevels, const double *levels, const double *leads, long order, long lower,
-                 long nalso, const long *also, const long *derivative, double gamma, double roughness,
-                 double sixth_gain, double floor_, double growth, double lattice, double timing, double *out) {
-    return fit_target(count, times, values, n, target, nlevels, levels, leads, order, lower, nalso, also,
+                 long nalso, const long *also, long finer, const long *derivative, double gamma,
+                 double roughness, double sixth_gain, double floor_, double growth, double lattice, double timing,
+                 double *out) {
+    return fit_target(count, times, values, n, target, nlevels, levels, leads, order, lower, nalso, also, finer,
                       derivative, gamma, roughness, sixth_gain, floor_, growth, lattice, timing, NULL, 0, 0, 0,
                       out);
 }
 
 /* adaptive_fit at each of ntargets targets over the whole of times, values; derivative (n,); out
-   (ntargets, 1 + nalso, 7, n); status (ntargets,) each target's return value. Neighbouring targets' windows
-   overlap: a block of them takes its sixth differences from one pass (sixths), which is most of
+   (ntargets, 1 + nalso + finer, 7, n); status (ntargets,) each target's return value. Neighbouring targets'
+   windows overlap: a block of them takes its sixth differences from one pass (sixths), which is most of
    each target's work otherwise; the numbers are the same as adaptive_fit's one target at a time. */
 void adaptive_fits(long count, const double *times, const double *values, long n, long ntargets,
                    const double *targets, long nlevels, const double *levels, const double *leads,
-                   long order, long lower, long nalso, const long *also, const long *derivative, double gamma,
-                   double roughness, double sixth_gain, double floor_, double growth, double lattice, double timing,
-                   double *out, int *status) {
+                   long order, long lower, long nalso, const long *also, long finer, const long *derivative,
+                   double gamma, double roughness, double sixth_gain, double floor_, double growth, double lattice,
+                   double timing, double *out, int *status) {
     const long block = 256;
     for (long first = 0; first < ntargets; first += block) {
         long last = first + block < ntargets ? first + block : ntargets, lo = count, hi = 0, widest = 0;
@@ -628,9 +644,9 @@ void adaptive_fits(long count, const double *times, const double *values, long n
         if (pre != NULL) sixths(times, values, n, lo, hi, strides, pre);
         for (long m = first; m < last; m++)
             status[m] = fit_target(count, times, values, n, targets[m], nlevels, levels, leads, order, lower,
-                                   nalso, also, derivative, gamma, roughness, sixth_gain, floor_, growth, lattice,
-                                   timing, pre, lo, hi - lo, pre == NULL ? 0 : strides,
-                                   out + m * (1 + nalso) * 7 * n);
+                                   nalso, also, finer, derivative, gamma, roughness, sixth_gain, floor_, growth,
+                                   lattice, timing, pre, lo, hi - lo, pre == NULL ? 0 : strides,
+                                   out + m * (1 + nalso + finer) * 7 * n);
         free(pre);
     }
 }
@@ -695,10 +711,11 @@ void causal_candidates(long count, const double *times, const double *values, lo
     free(fit);
 }
 
-/* One estimate's terms of the degree choice's sums into score (2 ndeg + 3): (a_g - a_(g-1))^2 at [g] (0 at [0]),
+/* One estimate's terms of the degree choice's sums into score (2 ndeg + 5): (a_g - a_(g-1))^2 at [g] (0 at [0]),
    v_g^2 at [ndeg + g], the reference's squared distance to its neighbouring window, s_0^2 - v_0^2 (at
-   least 0), at [2 ndeg] and what its noise alone puts there, w_0^2, at [2 ndeg + 1]; and 1 at
-   [2 ndeg + 2] where it counts (counted, and every degree's estimate and deviations finite), else 0
+   least 0), at [2 ndeg] and what its noise alone puts there, w_0^2, at [2 ndeg + 1], the same two of
+   degree 1 (of degree 0 where there is one degree) at [2 ndeg + 2] and [2 ndeg + 3]; and 1 at
+   [2 ndeg + 4] where it counts (counted, and every degree's estimate and deviations finite), else 0
    throughout. a, s, v, w: degree g's acceleration, stated deviation, noise's deviation and the noise's
    deviation between it and its neighbour at a[g * acc_g], s[g * std_g], v[g * noise_g], w[g * between_g]
    (see degree_choice.terms). */
@@ -713,53 +730,78 @@ static void degree_scores(long ndeg, const double *a, long acc_g, const double *
         score[g] = finite ? apart * apart : 0.0;
         score[ndeg + g] = finite ? noise * noise : 0.0;
     }
-    score[2 * ndeg] = finite ? nmax(s[0] * s[0] - v[0] * v[0], 0.0) : 0.0;
-    score[2 * ndeg + 1] = finite ? w[0] * w[0] : 0.0;
-    score[2 * ndeg + 2] = finite ? 1.0 : 0.0;
+    for (long r = 0; r < 2; r++) {
+        long g = r < ndeg ? r : 0;
+        double own = s[g * std_g], noise = v[g * noise_g], between = w[g * between_g];
+        score[2 * ndeg + 2 * r] = finite ? nmax(own * own - noise * noise, 0.0) : 0.0;
+        score[2 * ndeg + 2 * r + 1] = finite ? between * between : 0.0;
+    }
+    score[2 * ndeg + 4] = finite ? 1.0 : 0.0;
 }
 
 /* One estimate's degree and the deviation stated with it (degree_choice._least), from its window's sums
-   total[k * n] of degree_scores' terms k and count of estimates counted. */
+   total[k * n] of degree_scores' terms k and count of estimates counted. finer: degree 0 is the finer
+   fit, which the others' choice leaves out (degree 1 their reference, its colour read) and which then takes
+   the place of the degree chosen where its colour reads at most `white`, the record is `aged` (spans
+   degree_choice.RECORD) and its scores say it is the better (degree_choice._least). */
 static void decide(long ndeg, long n, const double *total, double count, const double *a, long acc_g,
                    const double *s, long std_g, const double *v, long noise_g, const double *w, long between_g,
-                   int counted, long least, double gamma, double strain, long *chosen, double *stated) {
-    double number = count > 1.0 ? count : 1.0, expected = total[(2 * ndeg + 1) * n];
-    double colour = expected > 0.0 ? nmax(total[2 * ndeg * n] / expected, 1.0) : 1.0;
+                   int counted, long least, double gamma, double strain, int finer, double white, int aged,
+                   long *chosen, double *stated) {
+    long first = finer && ndeg > 1 ? 1 : 0;  /* the reference */
+    double number = count > 1.0 ? count : 1.0, expected = total[(2 * ndeg + 1 + 2 * first) * n];
+    double colour = expected > 0.0 ? nmax(total[(2 * ndeg + 2 * first) * n] / expected, 1.0) : 1.0;
     int enough = count >= (double)least;
-    long best = 0;
+    long best = first;
     double best_score = 0.0, steps = 0.0;
-    for (long g = 0; g < ndeg; g++) {
-        steps += total[g * n];  /* the squared steps from the reference down to degree g */
+    for (long g = first; g < ndeg; g++) {
+        if (g > first) steps += total[g * n];  /* the squared steps from the reference down to degree g */
         double score = (steps + 2.0 * colour * total[(ndeg + g) * n]) / number;
-        if (g == 0 || (enough && score < best_score)) { best = g; best_score = score; }
+        if (g == first || (enough && score < best_score)) { best = g; best_score = score; }
     }
-    double usual = nmax(best_score - colour * total[ndeg * n] / number, 0.0), told = s[best * std_g];
+    double usual = nmax(best_score - colour * total[(ndeg + first) * n] / number, 0.0), told = s[best * std_g];
     if (enough && counted && told * told > strain * strain * usual) {
         /* this estimate's stated deviation far beyond the degree's usual error (its rule strained here):
            each degree's own variance now for one of its two, not its usual */
         steps = 0.0;
         double least = INFINITY;
-        for (long g = 0; g < ndeg; g++) {
-            steps += total[g * n];
+        for (long g = first; g < ndeg; g++) {
+            if (g > first) steps += total[g * n];
             double now = v[g * noise_g];
             double score = (steps + colour * total[(ndeg + g) * n]) / number + colour * now * now;
             if (score < least) { least = score; best = g; }
         }
         steps = 0.0;
-        for (long g = 1; g <= best; g++) steps += total[g * n];
+        for (long g = first + 1; g <= best; g++) steps += total[g * n];
         best_score = (steps + 2.0 * colour * total[(ndeg + best) * n]) / number;
     }
-    if (counted && fabs(a[best * acc_g] - a[0]) > gamma * hypot(s[best * std_g], s[0])) {
-        best = 0;
-        best_score = 2.0 * colour * total[ndeg * n] / number;
+    const double *reference = a + first * acc_g;
+    if (counted && fabs(a[best * acc_g] - *reference) > gamma * hypot(s[best * std_g], s[first * std_g])) {
+        best = first;
+        best_score = 2.0 * colour * total[(ndeg + first) * n] / number;
     }
-    double error = enough ? nmax(best_score - colour * total[ndeg * n] / number, 0.0) : 0.0;
-    double noise = v[best * noise_g], own = s[best * std_g], apart = a[best * acc_g] - a[0];
-    double between = w[best * between_g];
+    double error = enough ? nmax(best_score - colour * total[(ndeg + first) * n] / number, 0.0) : 0.0;
+    double noise = v[best * noise_g], own = s[best * std_g], apart = a[best * acc_g] - *reference;
+    double between = w[best * between_g], theirs = v[first * noise_g];
     double beside = nmax(own * own - noise * noise - colour * between * between, 0.0);
-    double beyond = nmax(apart * apart - colour * v[0] * v[0], 0.0);
+    double beyond = nmax(apart * apart - colour * theirs * theirs, 0.0);
     *chosen = best;
     *stated = sqrt(nmax(colour * noise * noise + beside + beyond, error));
+    expected = total[(2 * ndeg + 1) * n];
+    double reading = expected > 0.0 ? total[2 * ndeg * n] / expected : 1.0;
+    /* (the same fit as degree 1's where its rule chose its smallest window: no candidate) */
+    if (!first || !enough || !aged || !counted || reading > white || (a[0] == a[acc_g] && v[0] == v[noise_g]))
+        return;
+    /* the finer fit: the degree chosen's mean squared error over the reference's (its score less the
+       reference's), then the reference's over the finer's (their squared step less twice the difference
+       of their coloured variances, at the colour the finer's window reads) */
+    double tint = nmax(reading, 1.0), mine = total[ndeg * n] / number, rule = total[(ndeg + 1) * n] / number;
+    double gain = best_score - 2.0 * colour * rule + total[n] / number - 2.0 * tint * (mine - rule);
+    double finest = s[0], quiet = v[0], apart_f = w[0];
+    if (gain <= 0.0 || finest * finest > strain * strain * tint * mine) return;
+    *chosen = 0;
+    *stated = sqrt(nmax(tint * quiet * quiet + nmax(finest * finest - quiet * quiet - tint * apart_f * apart_f, 0.0),
+                        tint * mine));
 }
 
 /* degree_choice.choose over m estimates in stamp order (stamps, ns): per joint, degree_scores' terms
@@ -768,15 +810,15 @@ static void decide(long ndeg, long n, const double *total, double count, const d
    up afresh over its window, so that it stays within about 1e-14 of the direct sums the node adds
    (choose_last). acc, std, noise, between: degree g's acceleration, stated deviation, noise's deviation
    and the noise's deviation between it and its neighbour (degree_scores) of estimate t, joint j at
-   [g * _g + t * _t + j]; counted (m, n). Into chosen (m, n) the degree index and into stated (m, n) the
-   standard deviation stated with it. */
+   [g * _g + t * _t + j]; counted (m, n); record: ns, the least span of a window's estimates for the finer
+   fit (decide's aged). Into chosen (m, n) the degree index and into stated (m, n) the standard deviation
+   stated with it. */
 void choose_degrees(long m, long ndeg, long n, const long long *stamps, long long span, const double *acc,
                     long acc_g, long acc_t, const double *std, long std_g, long std_t, const double *noise,
                     long noise_g, long noise_t, const double *between, long between_g, long between_t,
-                    const unsigned char *counted, long least, double gamma, double strain, double precision,
-                    long refresh,
-                    long *chosen, double *stated) {
-    long sums = 2 * ndeg + 2, row = sums + 1;  /* each estimate's terms (m, n, row), whether it counts last */
+                    const unsigned char *counted, long least, double gamma, double strain, int finer, double white,
+                    long long record, double precision, long refresh, long *chosen, double *stated) {
+    long sums = 2 * ndeg + 4, row = sums + 1;  /* each estimate's terms (m, n, row), whether it counts last */
     double *scores = malloc(sizeof(double) * ((size_t)m * n * row + (size_t)(2 * sums + 1) * n));
     if (scores == NULL) {
         for (long k = 0; k < m * n; k++) { chosen[k] = 0; stated[k] = NAN; }
@@ -816,20 +858,22 @@ void choose_degrees(long m, long ndeg, long n, const long long *stamps, long lon
         for (long j = 0; j < n; j++)
             decide(ndeg, n, total + j, count[j], acc + t * acc_t + j, acc_g, std + t * std_t + j, std_g,
                    noise + t * noise_t + j, noise_g, between + t * between_t + j, between_g, counted[t * n + j],
-                   least, gamma, strain, chosen + t * n + j, stated + t * n + j);
+                   least, gamma, strain, finer, white, stamps[t] - stamps[first] >= record, chosen + t * n + j,
+                   stated + t * n + j);
     }
     free(scores);
 }
 
 /* The node's choice (degree_choice.DegreePool): the last of m estimates' degrees and deviations (n).
-   scores (m, 2 ndeg + 3, n): each estimate's terms and whether it counts (degree_scores' row, joint by
+   scores (m, 2 ndeg + 5, n): each estimate's terms and whether it counts (degree_scores' row, joint by
    joint); the last's are made here from acc, std, noise, between (ndeg, n) and counted (n). Their sums
-   over all m (the window) are added up directly, estimate by estimate. */
+   over all m (the window) are added up directly, estimate by estimate; aged: whether they span
+   degree_choice.RECORD (see decide). */
 void choose_last(long m, long ndeg, long n, double *scores, const double *acc, const double *std,
                  const double *noise, const double *between, const unsigned char *counted, long least,
-                 double gamma, double strain, long *chosen, double *stated) {
-    long width = 2 * ndeg + 3, row = width * n;
-    double total[(7 + 2 * MAX_ALSO) * n], score[7 + 2 * MAX_ALSO];
+                 double gamma, double strain, int finer, double white, int aged, long *chosen, double *stated) {
+    long width = 2 * ndeg + 5, row = width * n;
+    double total[(9 + 2 * MAX_ALSO) * n], score[9 + 2 * MAX_ALSO];
     if (ndeg > 2 + MAX_ALSO || m < 1) return;
     double *last = scores + (m - 1) * row;
     for (long j = 0; j < n; j++) {
@@ -843,7 +887,7 @@ void choose_last(long m, long ndeg, long n, double *scores, const double *acc, c
     }
     for (long j = 0; j < n; j++)
         decide(ndeg, n, total + j, total[(width - 1) * n + j], acc + j, n, std + j, n, noise + j, n, between + j,
-               n, counted[j], least, gamma, strain, chosen + j, stated + j);
+               n, counted[j], least, gamma, strain, finer, white, aged, chosen + j, stated + j);
 }
 """
 
@@ -909,11 +953,11 @@ class NativeAdaptiveFit:
 def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
     double, pointer, long = ctypes.c_double, ctypes.c_void_p, ctypes.c_long
     library.adaptive_fit.argtypes = [long, pointer, pointer, long, double, long, pointer, pointer, long, long,
-                                     long, pointer, pointer, double, double, double, double, double, double,
+                                     long, pointer, long, pointer, double, double, double, double, double, double,
                                      double, pointer]  # fmt: skip
     library.adaptive_fit.restype = ctypes.c_int
     library.adaptive_fits.argtypes = [long, pointer, pointer, long, long, pointer, long, pointer, pointer,
-                                      long, long, long, pointer, pointer, double, double, double, double, double,
+                                      long, long, long, pointer, long, pointer, double, double, double, double, double,
                                       double, double, pointer, pointer]  # fmt: skip
     library.adaptive_fits.restype = None
     library.causal_candidates.argtypes = [long, pointer, pointer, long, double, double, long, pointer, long, pointer,
@@ -921,10 +965,11 @@ def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
     library.causal_candidates.restype = None
     library.choose_degrees.argtypes = [long, long, long, pointer, ctypes.c_longlong, pointer, long, long, pointer,
                                        long, long, pointer, long, long, pointer, long, long, pointer, long, double,
-                                       double, double, long, pointer, pointer]  # fmt: skip
+                                       double, ctypes.c_int, double, ctypes.c_longlong, double, long, pointer,
+                                       pointer]  # fmt: skip
     library.choose_degrees.restype = None
     library.choose_last.argtypes = [long, long, long, pointer, pointer, pointer, pointer, pointer, pointer, long,
-                                    double, double, pointer, pointer]  # fmt: skip
+                                    double, double, ctypes.c_int, double, ctypes.c_int, pointer, pointer]  # fmt: skip
     library.choose_last.restype = None
     native_kalman.declare(library)
     return library
@@ -952,15 +997,17 @@ def fit(
     lower: int | None = None,
     also: tuple[int, ...] = (),
     timing: float = 0.0,
+    finer: bool = False,
 ) -> tuple[np.ndarray, ...] | None:
     """The C function's value, first and second derivative, stated standard deviation, strain, the
     noise's standard deviation and the deviation the noise puts between the estimate and the level its
-    stated deviation is measured against (D, n) each, for ``order`` and then each degree of ``also`` (D =
-    1 + len(also)); None where the Python function must serve (too few samples, an order above MAX_ORDER).
-    ``lower``: a second degree fused with ``order`` (:func:`neforward_ros.estimation.adaptive.fused`), in
-    the same call; ``also``, ``timing``: as for :func:`fits`."""
+    stated deviation is measured against (D, n) each, for ``order``'s next smaller window where ``finer``,
+    then ``order`` and each degree of ``also`` (D = finer + 1 + len(also)); None where the Python function
+    must serve (too few samples, an order above MAX_ORDER). ``lower``: a second degree fused with ``order``
+    (:func:`neforward_ros.estimation.adaptive.fused`), in the same call; ``also``, ``timing``, ``finer``: as
+    for :func:`fits`."""
     got = fits(library, times, values, np.array([target], dtype=float), half_widths, leads, order, derivative,
-               gamma, roughness, sixth_gain, floor, growth, lattice, lower, also, timing)  # fmt: skip
+               gamma, roughness, sixth_gain, floor, growth, lattice, lower, also, timing, finer)  # fmt: skip
     if got is None or not got[1][0]:
         return None
     out = got[0][0]
@@ -985,15 +1032,18 @@ def fits(
     lower: int | None = None,
     also: tuple[int, ...] = (),
     timing: float = 0.0,
+    finer: bool = False,
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """The C function at every target over the whole of ``times, values``: value, first and second
     derivative, stated standard deviation, strain, the noise's standard deviation and the deviation it
-    puts between the estimate and the level the stated one is measured against (M, 1 + len(also), 7, n)
-    for ``order`` and each further
-    degree of ``also`` (each below ``order``, with its own windows chosen: the numbers of a call at that
-    degree alone), and whether each target was done (M,) (where not, the Python function must serve);
-    None above MAX_ORDER. ``lower``: as for :func:`fit`. ``timing``: s, how far the samples' times may be from
-    their stamps (:func:`~.adaptive.timing_noise`; 0: none)."""
+    puts between the estimate and the level the stated one is measured against (M, finer + 1 + len(also), 7,
+    n) for ``order``'s next smaller window where ``finer`` (below), ``order`` and each further degree of
+    ``also`` (each below ``order``, with its own windows chosen: the numbers of a call at that degree alone),
+    and whether each target was done (M,) (where not, the Python function must serve); None above MAX_ORDER.
+    ``lower``: as for :func:`fit`. ``timing``: s, how far the samples' times may be from their stamps
+    (:func:`~.adaptive.timing_noise`; 0: none). ``finer``: first, ``order``'s fit at the next smaller window
+    than its rule chose (the smallest where it chose that; its strain the rule's): a candidate whose bias the
+    degree choice weighs against its noise (:mod:`~.degree_choice`)."""
     if order > MAX_ORDER or (lower is not None and not 0 < lower < order):
         return None
     if len(also) > MAX_ALSO or any(not 0 < degree < order for degree in also):
@@ -1003,7 +1053,7 @@ def fits(
     values = np.ascontiguousarray(values, dtype=float)
     targets = np.ascontiguousarray(targets, dtype=float)
     n = values.shape[1]
-    out = np.empty((len(targets), 1 + len(also), 7, n))
+    out = np.empty((len(targets), 1 + len(also) + finer, 7, n))
     status = np.empty(len(targets), dtype=np.intc)
     half_widths = np.ascontiguousarray(half_widths, dtype=float)
     leads = np.ascontiguousarray(leads, dtype=float)
@@ -1013,7 +1063,7 @@ def fits(
         count = part.stop - part.start
         library.adaptive_fits(len(times), times.ctypes.data, values.ctypes.data, n, count,
                               targets[part].ctypes.data, len(half_widths), half_widths.ctypes.data,
-                              leads.ctypes.data, order, lower or 0, len(also), degrees.ctypes.data,
+                              leads.ctypes.data, order, lower or 0, len(also), degrees.ctypes.data, int(finer),
                               derivative.ctypes.data, gamma, roughness,
                               sixth_gain, floor, growth, lattice, timing, out[part].ctypes.data,
                               status[part].ctypes.data)  # fmt: skip
@@ -1034,7 +1084,7 @@ def fits(
         finally:
             for thread in threads:
                 thread.join()
-    return out, status == 0
+    return (np.roll(out, 1, axis=1) if finer else out), status == 0  # the finer fit first
 
 
 def causal_candidates(
@@ -1080,12 +1130,17 @@ def choose_degrees(
     least: int,
     gamma: float,
     strain: float,
+    finer: bool,
+    white: float,
+    record_ns: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The C function's :func:`neforward_ros.estimation.degree_choice.choose`: the degree index chosen
     at each estimate (M, n) and the standard deviation stated with it (M, n), from every degree's
     accelerations, stated deviations, noise's deviations and the noise's deviations between each and
     its neighbouring window (D, M, n) (any strides, a joint's entries adjacent), which of them count
-    (M, n), at the stamps (M,), integer ns, increasing."""
+    (M, n), at the stamps (M,), integer ns, increasing; ``finer``, ``white``: whether the first is the
+    finer fit, the most colour it may read (:data:`~.degree_choice.WHITE`), and the least span of a window's
+    estimates for it (:data:`~.degree_choice.RECORD`, ns)."""
     item = accelerations.itemsize
     for array in (accelerations, stated, noise, between):
         if array.dtype != np.float64 or array.strides[2] != item or any(x % item for x in array.strides):
@@ -1100,7 +1155,8 @@ def choose_degrees(
                            stated.strides[0] // item, stated.strides[1] // item, noise.ctypes.data,
                            noise.strides[0] // item, noise.strides[1] // item, between.ctypes.data,
                            between.strides[0] // item, between.strides[1] // item, mask.ctypes.data, least, gamma,
-                           strain, CHOICE_PRECISION, CHOICE_REFRESH, chosen.ctypes.data, out.ctypes.data)  # fmt: skip
+                           strain, int(finer), white, int(record_ns), CHOICE_PRECISION, CHOICE_REFRESH,
+                           chosen.ctypes.data, out.ctypes.data)  # fmt: skip
     return chosen, out
 
 
@@ -1115,14 +1171,18 @@ def choose_last(
     least: int,
     gamma: float,
     strain: float,
+    finer: bool,
+    white: float,
+    aged: bool,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The C function's choice for the node (:class:`neforward_ros.estimation.degree_choice.DegreePool`):
     the last estimate's degree index (n,) and the standard deviation stated with it (n,). ``scores``
-    (W, 2 D + 3, n), contiguous: the window's estimates' terms (:func:`~.degree_choice.terms`) and
+    (W, 2 D + 5, n), contiguous: the window's estimates' terms (:func:`~.degree_choice.terms`) and
     whether each counts (the last row is written here, from the last estimate's accelerations, stated
     deviations, noise's deviations and those between each and its neighbour (D, n) and which count
-    (n,), uint8); their sums added up directly."""
-    rows, degrees, n = scores.shape[0], (scores.shape[1] - 3) // 2, scores.shape[2]
+    (n,), uint8); their sums added up directly. ``finer``, ``white``: as for :func:`choose_degrees`; ``aged``:
+    whether the window's estimates span :data:`~.degree_choice.RECORD`."""
+    rows, degrees, n = scores.shape[0], (scores.shape[1] - 5) // 2, scores.shape[2]
     accelerations = np.ascontiguousarray(accelerations, dtype=float)
     stated = np.ascontiguousarray(stated, dtype=float)
     noise = np.ascontiguousarray(noise, dtype=float)
@@ -1131,7 +1191,7 @@ def choose_last(
     out = np.full(n, np.nan)  # an empty window (none begun) states nothing
     library.choose_last(rows, degrees, n, scores.ctypes.data, accelerations.ctypes.data, stated.ctypes.data,
                         noise.ctypes.data, between.ctypes.data, counted.ctypes.data, least, gamma, strain,
-                        chosen.ctypes.data, out.ctypes.data)  # fmt: skip
+                        int(finer), white, int(aged), chosen.ctypes.data, out.ctypes.data)  # fmt: skip
     return chosen, out
 
 

@@ -631,7 +631,9 @@ class StreamingEstimator:
             chosen = self._chosen_fit(group, times, values, target_s, derivative, models, bank, lead)
             got = _per_joint(chosen, m, by_velocity, exact)
         elif self._degrees is not None:  # each degree's rule; the degree chosen per joint by the recent estimates
-            fits = degree_fit(times, values, target_s, half, degree_choice.DEGREES, lead, derivative)
+            fits = degree_fit(
+                times, values, target_s, half, degree_choice.DEGREES, lead, derivative, finer=degree_choice.FINER
+            )
             options = _per_joint(fits, m, by_velocity, exact)  # each (D, m)
             chosen, std = self._degrees.choose(np.asarray(group.joints), options[2], options[3], *options[5:])
             got = np.stack(options[:5])[:, chosen, np.arange(m)]  # each entry at each joint's chosen degree
