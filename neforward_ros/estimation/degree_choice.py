@@ -127,7 +127,7 @@ def terms(
     first: each degree's squared step from the one before, (a_k - a_(k-1))^2 (0 for the reference),
     then v_a^2 for each, then the reference's squared distance to its neighbour, s_r^2 - v_r^2 (at
     least 0), and what its noise alone puts there, w_r^2, then the same two of the second degree (the
-    first's where there is one); and 1 or 0 alike for each. Two (2 D + 4, ...), the terms 0 where not
+    first's where there is only one); and 1 or 0 alike for each. Two (2 D + 4, ...), the terms 0 where not
     counted."""
     accelerations, stated, noise, between = (
         np.asarray(x, dtype=float) for x in (accelerations, stated, noise, between)
