@@ -58,7 +58,12 @@ def add_only(parser: argparse.ArgumentParser) -> None:
 
 
 def chosen_settings(only: list[str] | None) -> dict[str, StreamSettings]:
-    """The settings of :data:`SETTINGS` whose names start with one of ``only``; every one where None."""
+    """The settings of :data:`SETTINGS` whose names start with one of ``only``; every one where None. A name
+    no setting's starts with stops the bench (``--only default`` ran nothing, silently: the default's name
+    starts with "polyfit fixed_lag")."""
+    unknown = [o for o in only or [] if not any(n.startswith(o) for n in SETTINGS)]
+    if unknown:
+        raise SystemExit(f"--only {','.join(unknown)}: no setting's name starts so; the settings: {list(SETTINGS)}")
     return {n: s for n, s in SETTINGS.items() if not only or any(n.startswith(o) for o in only)}
 
 
@@ -155,6 +160,7 @@ def main() -> None:
     args = parser.parse_args()
     grid = [(float(rate), int(bits)) for rate in args.rates.split(",") for bits in args.bits.split(",")]
     kinds, seeds = args.kinds.split(","), [int(seed) for seed in args.seeds.split(",")]
+    chosen = chosen_settings(args.only)
     print(f"{args.rates} Hz, {args.bits} bits, {JOINTS} joints; a {GAP[1] - GAP[0]:g} s gap at {GAP[0]:g} s, "
           f"stamps back {RESET_BY:g} s at {RESET_AT:g} s; the worst |error| in the second after each event over "
           "the steady p99")  # fmt: skip
@@ -162,7 +168,7 @@ def main() -> None:
     print(f"{'setting':<30}{'case':<22}{'p99':>9}{'start':>8}{'gap':>8}{'reset':>8}{'warm-up':>9}{'lost':>6}"
           f"{steady_columns}")  # fmt: skip
     verdicts = {}
-    for name, settings in chosen_settings(args.only).items():
+    for name, settings in chosen.items():
         ratios, losses, over, tails, warmups = [], [], 0, 0, []
         for rate, bits in grid:
             for kind in kinds:
