@@ -155,7 +155,7 @@ def test_a_strained_estimate_kept_on_its_record_fails_the_same_check(monkeypatch
     assert gap_transient() > 3.0
 
 
-@pytest.mark.parametrize("finer", [False, True], ids=["rule-reference", "finer-reference"])
+@pytest.mark.parametrize("finer", [False, True], ids=["degrees-alone", "with-the-finer-fit"])
 def test_the_choice_is_the_least_mean_score_over_the_last_second(finer: bool, monkeypatch) -> None:
     """choose() against a direct loop: per joint, the noise's colour c over the counted estimates
     stamped in (s - 1 s, s] (the reference's squared distances to its next window, s_r^2 - v_r^2,

@@ -158,7 +158,7 @@ def test_further_degrees_from_one_call_are_each_degrees_own_numbers() -> None:
 
 
 def test_the_finer_fit_is_the_rules_next_smaller_window_in_c_and_numpy_and_node_and_bag() -> None:
-    """The default's reference (``finer``): the first degree's fit at the next smaller window than its
+    """The default's finer fit (``finer``): the first degree's fit at the next smaller window than its
     rule chose. C and numpy take the same level (the same strain, the rule's) and agree to rounding; the
     others from the same call are unchanged; the whole recording's are bitwise the node's."""
     lib = library()
