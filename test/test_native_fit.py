@@ -18,6 +18,10 @@ from neforward_ros.kinematics import native
 pytestmark = pytest.mark.skipif(native.compiler() is None, reason="no C compiler (cc) here: numpy serves")
 
 
+CONSTANTS = (adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._GAIN, adaptive.FLOOR, adaptive.GROWTH, adaptive.LATTICE)
+"""The rule's constants, as the package passes them to the C fit after the degree and derivative."""
+
+
 def library():
     found = native_fit.FIT.get(wait=True)
     assert found is not None, "the C adaptive fit did not build"
@@ -60,8 +64,7 @@ def test_c_and_numpy_choose_the_same_windows_and_agree_to_rounding() -> None:
         # two degrees fused: numpy fits each on its own, C both from one set of sums
         want = adaptive.python_adaptive_fit(t, y, target, h, order, lead, derivative, lower)
         got = native_fit.fit(lib, t, y, target, *adaptive._ladder_and_leads(h, lead), order, derivative,
-                             adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._GAIN, adaptive.FLOOR,
-                             adaptive.GROWTH, adaptive.LATTICE, lower)  # fmt: skip
+                             *CONSTANTS, lower)  # fmt: skip
         assert got is not None
         got = tuple(entry[0] for entry in got)  # the one degree's
         np.testing.assert_array_equal(got[4], want[4])  # strained: the same windows chosen
@@ -126,10 +129,8 @@ def test_further_degrees_from_one_call_are_each_degrees_own_numbers() -> None:
             continue
         also = tuple(int(d) for d in rng.choice(np.arange(2, order), size=2, replace=False))
         ladder = adaptive._ladder_and_leads(h, lead)
-        constants = (adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._GAIN, adaptive.FLOOR, adaptive.GROWTH,
-                     adaptive.LATTICE)  # fmt: skip
-        together = native_fit.fit(lib, t, y, target, *ladder, order, derivative, *constants, lower, also)
-        alone = [native_fit.fit(lib, t, y, target, *ladder, degree, derivative, *constants, fused)
+        together = native_fit.fit(lib, t, y, target, *ladder, order, derivative, *CONSTANTS, lower, also)
+        alone = [native_fit.fit(lib, t, y, target, *ladder, degree, derivative, *CONSTANTS, fused)
                  for degree, fused in zip((order, *also), (lower, None, None), strict=True)]  # fmt: skip
         assert together is not None and together[0].shape == (1 + len(also), len(derivative))
         for i, one in enumerate(alone):
@@ -144,17 +145,25 @@ def test_further_degrees_from_one_call_are_each_degrees_own_numbers() -> None:
             # to it, is larger (up to 5e-4 in 1500 windows, causal ones; 2e-5 centred or lagged)
             assert np.all(np.abs(got[3] - want[3]) <= 2e-3 * want[3]), (order, also, lead)
     assert worst > 0.0  # the additions' order does differ somewhere
+    node_is_bag(rng, 1.0, (6, 4, 2), finer=False)
+
+
+def node_is_bag(rng: np.random.Generator, speed: float, degrees: tuple[int, ...], finer: bool) -> tuple:
+    """Asserts that :func:`adaptive.degree_fit` on one target's window (the node) gives bitwise what
+    :func:`adaptive.degree_fits` gives at every target of a recording (the bag tool), on sines of ``speed``
+    rad/s per joint index at 500 Hz with jitter and noise; returns the recording's fits."""
     count, n = 3000, 3
     t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
-    y = np.sin(t[:, None] * np.arange(1, n + 1)) + rng.normal(0.0, 1e-4, (count, n))
-    whole = adaptive.degree_fits(t, y, t, 0.1, (6, 4, 2), 0.1)
+    y = np.sin(speed * t[:, None] * np.arange(1, n + 1)) + rng.normal(0.0, 1e-4, (count, n))
+    whole = adaptive.degree_fits(t, y, t, 0.1, degrees, 0.1, finer=finer)
     for i in range(60, count - 60, 53):
         lo, hi = np.searchsorted(t, t[i] - 0.1), np.searchsorted(t, t[i] + 0.1, side="right")
-        one = adaptive.degree_fit(t[lo:hi], y[lo:hi], t[i], 0.1, (6, 4, 2), 0.1, np.full(n, 2))
+        one = adaptive.degree_fit(t[lo:hi], y[lo:hi], t[i], 0.1, degrees, 0.1, np.full(n, 2), finer=finer)
         for k in range(4):
             np.testing.assert_array_equal(one[k], whole[k][:, i])
         np.testing.assert_array_equal(one[5], whole[4][:, i])  # the noise's deviation
         np.testing.assert_array_equal(one[6], whole[5][:, i])  # and the noise's between it and its neighbour
+    return whole
 
 
 def test_the_finer_fit_is_the_rules_next_smaller_window_in_c_and_numpy_and_node_and_bag() -> None:
@@ -169,10 +178,8 @@ def test_the_finer_fit_is_the_rules_next_smaller_window_in_c_and_numpy_and_node_
         if order < 4:
             continue
         ladder = adaptive._ladder_and_leads(h, lead)
-        constants = (adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._GAIN, adaptive.FLOOR, adaptive.GROWTH,
-                     adaptive.LATTICE)  # fmt: skip
-        got = native_fit.fit(lib, t, y, target, *ladder, order, derivative, *constants, None, (3,), 0.0, True)
-        plain = native_fit.fit(lib, t, y, target, *ladder, order, derivative, *constants, None, (3,))
+        got = native_fit.fit(lib, t, y, target, *ladder, order, derivative, *CONSTANTS, None, (3,), 0.0, True)
+        plain = native_fit.fit(lib, t, y, target, *ladder, order, derivative, *CONSTANTS, None, (3,))
         assert got is not None and plain is not None and got[0].shape == (3, len(derivative))
         for k in range(7):  # the rule's own fits, after the finer one, are those of a call without it
             np.testing.assert_array_equal(got[k][1:], plain[k])
@@ -186,18 +193,8 @@ def test_the_finer_fit_is_the_rules_next_smaller_window_in_c_and_numpy_and_node_
         np.testing.assert_allclose(got[5][0], want[3], rtol=1e-6)  # a smaller window's noise
         shifted += int(np.count_nonzero(got[5][0] > got[5][1]))
     assert shifted > 0  # a noisier, smaller window somewhere
-    count, n = 3000, 3
-    t = (np.arange(count) + rng.uniform(-0.1, 0.1, count)) / 500.0
-    y = np.sin(3 * t[:, None] * np.arange(1, n + 1)) + rng.normal(0.0, 1e-4, (count, n))
-    whole = adaptive.degree_fits(t, y, t, 0.1, (6, 4, 3), 0.1, finer=True)
-    assert whole[0].shape == (4, count, n) and np.any(whole[2][0] != whole[2][1])
-    for i in range(60, count - 60, 53):
-        lo, hi = np.searchsorted(t, t[i] - 0.1), np.searchsorted(t, t[i] + 0.1, side="right")
-        one = adaptive.degree_fit(t[lo:hi], y[lo:hi], t[i], 0.1, (6, 4, 3), 0.1, np.full(n, 2), finer=True)
-        for k in range(4):
-            np.testing.assert_array_equal(one[k], whole[k][:, i])
-        np.testing.assert_array_equal(one[5], whole[4][:, i])
-        np.testing.assert_array_equal(one[6], whole[5][:, i])
+    whole = node_is_bag(rng, 3.0, (6, 4, 3), finer=True)
+    assert whole[0].shape == (4, 3000, 3) and np.any(whole[2][0] != whole[2][1])
 
 
 def test_targets_with_too_few_samples_take_numpy_and_no_compiler_takes_numpy_everywhere(monkeypatch) -> None:
@@ -244,8 +241,7 @@ def test_c_and_numpy_floor_the_noise_alike_where_the_times_are_uncertain() -> No
         timing = float(rng.uniform(0.01, 0.2)) * float(np.median(np.diff(t)))
         want = adaptive.python_adaptive_fit(t, y, target, h, order, lead, derivative, lower, timing)
         got = native_fit.fit(lib, t, y, target, *adaptive._ladder_and_leads(h, lead), order, derivative,
-                             adaptive.GAMMA, adaptive.ROUGHNESS, adaptive._GAIN, adaptive.FLOOR,
-                             adaptive.GROWTH, adaptive.LATTICE, lower, (), timing)  # fmt: skip
+                             *CONSTANTS, lower, (), timing)  # fmt: skip
         assert got is not None
         got = tuple(entry[0] for entry in got)
         np.testing.assert_array_equal(got[4], want[4])
