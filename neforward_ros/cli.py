@@ -185,13 +185,16 @@ def _command(argv: Sequence[str] | None) -> int:
 
             return echo(args.topic, args.type, args.count)
     except (NeforwardError, FileNotFoundError) as exc:
+        if ctrl_c.came():  # an error that a library made of the Ctrl-C (an ImportError: "needs matplotlib")
+            terminal.say("neforward: interrupted")
+            return 130
         terminal.say(f"neforward: error: {exc}")
         return 1
     except BrokenPipeError:  # output piped into `head` and the like
         sys.stderr.close()
         return 0
     except BaseException as exc:  # Ctrl-C (perhaps wrapped): every command has cleaned up on its way out
-        if not _interrupted(exc):
+        if not (_interrupted(exc) or ctrl_c.came()):
             raise
         terminal.say("neforward: interrupted")
         return 130
@@ -226,7 +229,7 @@ def _ctrl_c_raises() -> None:
     :mod:`neforward_ros.command` ended the process at once)."""
     command = sys.modules.get("neforward_ros.command")
     if command is not None and signal.getsignal(signal.SIGINT) is command.interrupted_early:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGINT, ctrl_c.interrupt)
     ctrl_c.acted_on()
 
 
@@ -247,16 +250,18 @@ def entry() -> None:
     """The ``neforward`` executable: :func:`main`'s status as the process's exit status.
 
     After Ctrl-C the status is 130 even where a library saw the interrupt on its way out (CPython
-    then re-raises SIGINT at exit): everything was cleaned up already, so the exit is immediate.
+    then re-raises SIGINT at exit): everything was cleaned up already, so the exit is immediate. It is
+    immediate too wherever a Ctrl-C came: a C extension whose import it landed in may be left half made,
+    and the interpreter's shutdown can crash on that (:mod:`neforward_ros.ctrl_c`).
     """
     status = _command(None)  # where the work is done, Ctrl-C stays held off until the exit
     # The work is done (or cleaned up): a Ctrl-C now, while the interpreter shuts down, must not
     # turn the outcome into a traceback or a death by SIGINT.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    if status == 130:
+    if status == 130 or ctrl_c.came():
         sys.stdout.flush()
         sys.stderr.flush()
-        os._exit(130)
+        os._exit(status)
     sys.exit(status)
 
 

@@ -11,7 +11,14 @@ run would end done (exit status 0) with a traceback on the terminal. So:
 - once its outputs are in place (:func:`hold`), SIGINT is ignored; the executable keeps it so until it
   exits.
 
-:func:`release` puts back what the two changed (a command run in-process, by a test calling
+A library can also turn the KeyboardInterrupt into another error or swallow it: a C extension whose
+import it lands in (2026-11-30: in CI, one in matplotlib's came out as an ImportError, the run ended on
+"--plot needs matplotlib" and the interpreter crashed at exit; here, one in lxml's was swallowed and the
+run went on to finish). So the executable's handler (:func:`interrupt`) remembers that a
+Ctrl-C came: the command counts any error after it as the interrupt (:func:`came`), and a long command
+acts on one swallowed at its next step (:func:`check`).
+
+:func:`release` puts back what these changed (a command run in-process, by a test calling
 :func:`neforward_ros.cli.main`).
 """
 
@@ -21,10 +28,41 @@ import _thread
 import signal
 import sys
 import threading
+from collections.abc import Callable
 from typing import Any
 
 _handler: list[Any] = []  # the SIGINT handler put aside by hold(), while it holds
 _hook: list[Any] = []  # the unraisable hook put aside by acted_on(), while it is in place
+_came: list[bool] = []  # [True] once interrupt() ran
+
+
+def interrupt(signum: int, frame: object) -> None:
+    """SIGINT's handler while the executable runs a command: Python's own (KeyboardInterrupt), and the
+    Ctrl-C remembered."""
+    _came[:] = [True]
+    raise KeyboardInterrupt
+
+
+def came() -> bool:
+    """Whether :func:`interrupt` ran: the command was interrupted, whatever a library made of it."""
+    return bool(_came)
+
+
+def check() -> None:
+    """KeyboardInterrupt if a Ctrl-C came (one that a library swallowed is acted on here), until the
+    command's work is done (:func:`hold`)."""
+    if _came and not _handler:
+        raise KeyboardInterrupt
+
+
+def checking(progress: Callable[[str, float], None]) -> Callable[[str, float], None]:
+    """``progress``, calling :func:`check` first: a long command's steps are where it stops."""
+
+    def step(stage: str, fraction: float) -> None:
+        check()
+        progress(stage, fraction)
+
+    return step
 
 
 def _unraisable(unraisable: Any) -> None:
@@ -60,3 +98,4 @@ def release() -> None:
         signal.signal(signal.SIGINT, _handler.pop())
     if _hook:
         sys.unraisablehook = _hook.pop()
+    _came.clear()

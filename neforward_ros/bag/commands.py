@@ -35,9 +35,11 @@ def run_bag(args: argparse.Namespace) -> int:
         output = Path(args.output)
         csv = _beside(output, args.csv, ".csv")
         plot = _beside(output, args.plot, ".png")
-        # Ctrl-C is held off from the moment every output is in place (on_done): the run is done
+        # Ctrl-C is held off from the moment every output is in place (on_done): the run is done; before,
+        # one that a library swallowed stops it at its next step
+        progress = ctrl_c.checking(Progress())
         report = process_bag(
-            inputs[0], output, options, csv_path=csv, plot_path=plot, progress=Progress(), on_done=ctrl_c.hold
+            inputs[0], output, options, csv_path=csv, plot_path=plot, progress=progress, on_done=ctrl_c.hold
         )
         print(describe(report))
         return 0
@@ -56,6 +58,7 @@ def run_bag(args: argparse.Namespace) -> int:
     started = time.monotonic()
 
     def said(k: int, outcome) -> None:
+        ctrl_c.check()  # a Ctrl-C that a library swallowed in a job run here stops the fleet
         detail = {"done": f"{outcome.samples} samples in {outcome.seconds:.1f} s", "skipped": "outputs exist"}
         print(
             f"[{k + 1}/{len(jobs)}] {outcome.job.input}: {outcome.status}, "

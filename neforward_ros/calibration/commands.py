@@ -8,6 +8,7 @@ import signal
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from neforward_ros import ctrl_c
 from neforward_ros.errors import InputError
 
 if TYPE_CHECKING:  # imported when the command runs: the command line of every command builds this parser
@@ -86,8 +87,9 @@ def run_calibrate(args: argparse.Namespace) -> int:
         stribeck=args.stribeck,
         payload=args.payload,
         inertia=not args.no_inertia,
-        progress=Progress(),
+        progress=ctrl_c.checking(Progress()),  # a Ctrl-C that a library swallowed stops it at its next step
     )
+    ctrl_c.check()
     text = params_yaml(found.parameters, header=_header(found, args.inputs))
     partial = output.with_name(f".{output.name}.partial-{os.getpid()}")
     partial.write_text(text)
