@@ -743,7 +743,8 @@ static void degree_scores(long ndeg, const double *a, long acc_g, const double *
    total[k * n] of degree_scores' terms k and count of estimates counted. finer: degree 0 is the finer
    fit, which the others' choice leaves out (degree 1 their reference, its colour read) and which then takes
    the place of the degree chosen where its colour reads at most `white`, the record is `aged` (spans
-   degree_choice.RECORD) and its scores say it is the better (degree_choice._least). */
+   degree_choice.RECORD with no hole, degree_choice.HOLE) and its scores say it is the better
+   (degree_choice._least). */
 static void decide(long ndeg, long n, const double *total, double count, const double *a, long acc_g,
                    const double *s, long std_g, const double *v, long noise_g, const double *w, long between_g,
                    int counted, long least, double gamma, double strain, int finer, double white, int aged,
@@ -794,9 +795,9 @@ static void decide(long ndeg, long n, const double *total, double count, const d
         return;
     /* the finer fit: the degree chosen's mean squared error over the reference's (its score less the
        reference's), then the reference's over the finer's (their squared step less twice the difference
-       of their coloured variances, at the colour the finer's window reads) */
+       of their coloured variances, at the colour the finer's window reads, below 1 too) */
     double tint = nmax(reading, 1.0), mine = total[ndeg * n] / number, rule = total[(ndeg + 1) * n] / number;
-    double gain = best_score - 2.0 * colour * rule + total[n] / number - 2.0 * tint * (mine - rule);
+    double gain = best_score - 2.0 * colour * rule + total[n] / number - 2.0 * reading * (mine - rule);
     double finest = s[0], quiet = v[0], apart_f = w[0];
     if (gain <= 0.0 || finest * finest > strain * strain * tint * mine) return;
     *chosen = 0;
@@ -810,14 +811,15 @@ static void decide(long ndeg, long n, const double *total, double count, const d
    up afresh over its window, so that it stays within about 1e-14 of the direct sums the node adds
    (choose_last). acc, std, noise, between: degree g's acceleration, stated deviation, noise's deviation
    and the noise's deviation between it and its neighbour (degree_scores) of estimate t, joint j at
-   [g * _g + t * _t + j]; counted (m, n); record: ns, the least span of a window's estimates for the finer
-   fit (decide's aged). Into chosen (m, n) the degree index and into stated (m, n) the standard deviation
-   stated with it. */
+   [g * _g + t * _t + j]; counted (m, n); record and hole: ns, the least span of a window's estimates for
+   the finer fit and the longest interval between them (decide's aged). Into chosen (m, n) the degree
+   index and into stated (m, n) the standard deviation stated with it. */
 void choose_degrees(long m, long ndeg, long n, const long long *stamps, long long span, const double *acc,
                     long acc_g, long acc_t, const double *std, long std_g, long std_t, const double *noise,
                     long noise_g, long noise_t, const double *between, long between_g, long between_t,
                     const unsigned char *counted, long least, double gamma, double strain, int finer, double white,
-                    long long record, double precision, long refresh, long *chosen, double *stated) {
+                    long long record, long long hole, double precision, long refresh, long *chosen,
+                    double *stated) {
     long sums = 2 * ndeg + 4, row = sums + 1;  /* each estimate's terms (m, n, row), whether it counts last */
     double *scores = malloc(sizeof(double) * ((size_t)m * n * row + (size_t)(2 * sums + 1) * n));
     if (scores == NULL) {
@@ -831,8 +833,9 @@ void choose_degrees(long m, long ndeg, long n, const long long *stamps, long lon
             degree_scores(ndeg, acc + t * acc_t + j, acc_g, std + t * std_t + j, std_g, noise + t * noise_t + j,
                           noise_g, between + t * between_t + j, between_g, counted[t * n + j],
                           scores + (t * n + j) * row);
-    long first = 0, since = 0;
+    long first = 0, since = 0, after = 0;  /* after: the first estimate since the last hole */
     for (long t = 0; t < m; t++) {
+        if (t > 0 && stamps[t] - stamps[t - 1] > hole) after = t;
         for (long j = 0; j < n; j++) {  /* this estimate joins its window */
             const double *score = scores + (t * n + j) * row;
             count[j] += score[sums];
@@ -858,8 +861,8 @@ void choose_degrees(long m, long ndeg, long n, const long long *stamps, long lon
         for (long j = 0; j < n; j++)
             decide(ndeg, n, total + j, count[j], acc + t * acc_t + j, acc_g, std + t * std_t + j, std_g,
                    noise + t * noise_t + j, noise_g, between + t * between_t + j, between_g, counted[t * n + j],
-                   least, gamma, strain, finer, white, stamps[t] - stamps[first] >= record, chosen + t * n + j,
-                   stated + t * n + j);
+                   least, gamma, strain, finer, white, first >= after && stamps[t] - stamps[first] >= record,
+                   chosen + t * n + j, stated + t * n + j);
     }
     free(scores);
 }
@@ -868,7 +871,7 @@ void choose_degrees(long m, long ndeg, long n, const long long *stamps, long lon
    scores (m, 2 ndeg + 5, n): each estimate's terms and whether it counts (degree_scores' row, joint by
    joint); the last's are made here from acc, std, noise, between (ndeg, n) and counted (n). Their sums
    over all m (the window) are added up directly, estimate by estimate; aged: whether they span
-   degree_choice.RECORD (see decide). */
+   degree_choice.RECORD with no hole (see decide). */
 void choose_last(long m, long ndeg, long n, double *scores, const double *acc, const double *std,
                  const double *noise, const double *between, const unsigned char *counted, long least,
                  double gamma, double strain, int finer, double white, int aged, long *chosen, double *stated) {
@@ -965,8 +968,8 @@ def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
     library.causal_candidates.restype = None
     library.choose_degrees.argtypes = [long, long, long, pointer, ctypes.c_longlong, pointer, long, long, pointer,
                                        long, long, pointer, long, long, pointer, long, long, pointer, long, double,
-                                       double, ctypes.c_int, double, ctypes.c_longlong, double, long, pointer,
-                                       pointer]  # fmt: skip
+                                       double, ctypes.c_int, double, ctypes.c_longlong, ctypes.c_longlong, double,
+                                       long, pointer, pointer]  # fmt: skip
     library.choose_degrees.restype = None
     library.choose_last.argtypes = [long, long, long, pointer, pointer, pointer, pointer, pointer, pointer, long,
                                     double, double, ctypes.c_int, double, ctypes.c_int, pointer, pointer]  # fmt: skip
@@ -1133,6 +1136,7 @@ def choose_degrees(
     finer: bool,
     white: float,
     record_ns: int,
+    hole_ns: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The C function's :func:`neforward_ros.estimation.degree_choice.choose`: the degree index chosen
     at each estimate (M, n) and the standard deviation stated with it (M, n), from every degree's
@@ -1140,7 +1144,8 @@ def choose_degrees(
     its neighbouring window (D, M, n) (any strides, a joint's entries adjacent), which of them count
     (M, n), at the stamps (M,), integer ns, increasing; ``finer``, ``white``: whether the first is the
     finer fit, the most colour it may read (:data:`~.degree_choice.WHITE`), and the least span of a window's
-    estimates for it (:data:`~.degree_choice.RECORD`, ns)."""
+    estimates for it and the longest interval between them (:data:`~.degree_choice.RECORD`,
+    :data:`~.degree_choice.HOLE`, ns)."""
     item = accelerations.itemsize
     for array in (accelerations, stated, noise, between):
         if array.dtype != np.float64 or array.strides[2] != item or any(x % item for x in array.strides):
@@ -1155,7 +1160,7 @@ def choose_degrees(
                            stated.strides[0] // item, stated.strides[1] // item, noise.ctypes.data,
                            noise.strides[0] // item, noise.strides[1] // item, between.ctypes.data,
                            between.strides[0] // item, between.strides[1] // item, mask.ctypes.data, least, gamma,
-                           strain, int(finer), white, int(record_ns), CHOICE_PRECISION, CHOICE_REFRESH,
+                           strain, int(finer), white, int(record_ns), int(hole_ns), CHOICE_PRECISION, CHOICE_REFRESH,
                            chosen.ctypes.data, out.ctypes.data)  # fmt: skip
     return chosen, out
 
@@ -1181,7 +1186,7 @@ def choose_last(
     whether each counts (the last row is written here, from the last estimate's accelerations, stated
     deviations, noise's deviations and those between each and its neighbour (D, n) and which count
     (n,), uint8); their sums added up directly. ``finer``, ``white``: as for :func:`choose_degrees`; ``aged``:
-    whether the window's estimates span :data:`~.degree_choice.RECORD`."""
+    whether the window's estimates span :data:`~.degree_choice.RECORD` with no hole (:data:`~.degree_choice.HOLE`)."""
     rows, degrees, n = scores.shape[0], (scores.shape[1] - 5) // 2, scores.shape[2]
     accelerations = np.ascontiguousarray(accelerations, dtype=float)
     stated = np.ascontiguousarray(stated, dtype=float)
