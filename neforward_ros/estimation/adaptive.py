@@ -605,6 +605,11 @@ class StampedRows:
         return self._rows[self._first : self._end]
 
     @property
+    def stamps(self) -> np.ndarray:
+        """The stamps of the rows kept (rows,), ns, the newest last: a view."""
+        return self._stamps[self._first : self._end]
+
+    @property
     def held_ns(self) -> int:
         """The span of the rows kept, ns: from the oldest's stamp to the newest's (0 with none)."""
         return int(self._stamps[self._end - 1] - self._stamps[self._first]) if self._end > self._first else 0

@@ -301,13 +301,12 @@ class DegreePool:
         self._noise = np.zeros((options, joints))
         self._between = np.zeros((options, joints))
         self._counted = np.zeros(joints, dtype=np.uint8)
-        self._last_ns: int | None = None  # the last estimate's stamp
-        self._after_ns: int | None = None  # the first estimate's since the last hole (HOLE)
+        self._after_ns: int | None = None  # the first estimate's stamp since the last hole (HOLE)
 
     def clear(self) -> None:
         """Forget every estimate (a new stream)."""
         self._rows.clear()
-        self._last_ns = self._after_ns = None
+        self._after_ns = None
 
     def forget(self, joints: list[int]) -> None:
         """Forget these joints' estimates so far (their samples' times changed: see :mod:`.clock`)."""
@@ -316,9 +315,9 @@ class DegreePool:
     def start(self, stamp_ns: int) -> None:
         """Begin the estimate at ``stamp_ns`` (after every earlier one); the estimates a second older
         are forgotten."""
-        if self._last_ns is not None and stamp_ns - self._last_ns > round(HOLE * NS):
+        kept = self._rows.stamps
+        if len(kept) and stamp_ns - kept[-1] > round(HOLE * NS):
             self._after_ns = stamp_ns
-        self._last_ns = stamp_ns
         self._rows.append(stamp_ns)
         self._counted[:] = 0
 
@@ -339,7 +338,7 @@ class DegreePool:
         self._counted[joints] = 1
         window = self._rows.window
         held_ns = self._rows.held_ns  # the window's span, 0 where it holds a hole
-        if self._after_ns is not None and int(self._last_ns) - held_ns < self._after_ns:  # type: ignore[arg-type]
+        if self._after_ns is not None and self._rows.stamps[0] < self._after_ns:
             held_ns = 0
         library = native_fit.FIT.get()
         if library is not None:
