@@ -8,7 +8,7 @@ import numpy as np
 
 from neforward_ros.estimation.clock import SampleClock
 from neforward_ros.estimation.kalman_bank import KalmanBank
-from neforward_ros.estimation.repeats import MOST_REPEATS, MOVING_STEPS, moving, stopped
+from neforward_ros.estimation.repeats import MOST_REPEATS, MOVING_STEPS, changing, stopped
 from neforward_ros.stamps import NS
 
 
@@ -154,7 +154,7 @@ class JointHistory:
         newest = self._positions[self.end - 1]
         if any(p != newest[k] for k, p in enumerate(positions)):
             return False
-        if not moving(self._positions[self.end - MOVING_STEPS - 1 : self.end]):
+        if not changing(self._positions[self.end - MOVING_STEPS - 1 : self.end]):
             return False
         self.intervals.append(stamp_ns - self.newest_received)
         self.newest_received = stamp_ns
