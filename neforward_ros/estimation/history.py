@@ -166,8 +166,9 @@ class JointHistory:
         self, stamp_ns: int, positions: list[float], velocities: list[float], efforts: list[float], max_hole_ns: int
     ) -> None:
         """A new sample, newest of all. After a run of left-out samples that was a stop, not a driver's
-        repeats (:data:`MOST_REPEATS` of them, or a moving joint that the new sample leaves where it
-        was: :func:`~neforward_ros.estimation.repeats.stopped`), those samples are taken back first, in
+        repeats (:data:`MOST_REPEATS` of them, or a new sample that leaves a moving joint where it was
+        or moves none onwards by more than one interval could:
+        :func:`~neforward_ros.estimation.repeats.stopped`), those samples are taken back first, in
         order."""
         run, self.run = self.run, []
         if len(run) >= MOST_REPEATS or (

@@ -19,7 +19,9 @@ samples around it), when all of these hold:
   at each of those steps (a joint that moves that steadily cannot stand still for exactly one
   interval, even at an encoder's resolution), or at each of the last two of them, by half again as
   much at the second (a joint speeding up, as at a move's start, whose readings cannot stand still
-  either) (:func:`moving_joints`), the run is a stop only if the sample that ends it leaves every
+  either: on the estimator family's minimum-jerk moves at 100 Hz with driver repeats, such a repeat
+  read as a stop made the Kalman 20 ms setting's error 6.0-7.2x hindsight's) (:func:`moving_joints`),
+  the run is a stop only if the sample that ends it leaves every
   such joint where it was, and moves no joint onwards by more than one interval could: joints that
   moved at every step and then keep their positions over the run and the sample after it, the
   others moving on as before, have stopped (a minimum-jerk move's end through 12 bits at 100 Hz: the
@@ -29,8 +31,8 @@ samples around it), when all of these hold:
   repeat; a move's first change after a rest), the run is a repeat only where the sample that ends
   it moves some joint onwards, in the direction of its last change, by more than
   :data:`SPEEDING_UP` times its largest change between the kept samples: the joint moved through
-  the run's intervals, the run held its reading. On the unseen estimator bench's minimum-jerk moves
-  at 150 Hz through 15 bits with 8 % repeats, a repeat after a move's first two changes of two steps
+  the run's intervals, the run held its reading. On the unseen estimator bench's fresh minimum-jerk
+  moves at 150 Hz through 15 bits with 8 % repeats, a repeat after a move's first two changes of two steps
   each, followed by one of 13, was fitted as a stop, and the Kalman 20 ms setting's error was 1.77x
   hindsight's (1.16x once left out). A run that is a stop is taken back, as above.
 
@@ -48,7 +50,8 @@ from __future__ import annotations
 import numpy as np
 
 MOVING_STEPS = 3
-"""Steps between the kept samples before a candidate at each of which a joint must have changed."""
+"""Steps between the kept samples before a candidate: a joint that changed at each of them is moving
+(:func:`moving_joints`); one that changed at some of them makes the candidate (:func:`changing`)."""
 SPEEDING_UP = 1.5
 """How many times its change at the step before a joint's last change must be for the joint to be
 speeding up: clear of one encoder step against one step (the two differences of positions on a grid
