@@ -21,20 +21,20 @@ samples around it), when all of these hold:
   much at the second (a joint speeding up, as at a move's start, whose readings cannot stand still
   either: on the estimator family's minimum-jerk moves at 100 Hz with driver repeats, such a repeat
   read as a stop made the Kalman 20 ms setting's error 6.0-7.2x hindsight's) (:func:`moving_joints`),
-  the run is a stop only if the sample that ends it leaves every
-  such joint where it was, and moves no joint onwards by more than one interval could: joints that
-  moved at every step and then keep their positions over the run and the sample after it, the
-  others moving on as before, have stopped (a minimum-jerk move's end through 12 bits at 100 Hz: the
-  joint creeps one encoder step a sample into its target; taken as repeats, the run left a hole in
-  every joint's samples, and the default setting gave no estimate for 0.2 s at each such stop).
-  Where no joint moved that steadily (a joint slower than a step a sample, whose readings often
-  repeat; a move's first change after a rest), the run is a repeat only where the sample that ends
-  it moves some joint onwards, in the direction of its last change, by more than
-  :data:`SPEEDING_UP` times its largest change between the kept samples: the joint moved through
-  the run's intervals, the run held its reading. On the unseen estimator bench's fresh minimum-jerk
-  moves at 150 Hz through 15 bits with 8 % repeats, a repeat after a move's first two changes of two steps
-  each, followed by one of 13, was fitted as a stop, and the Kalman 20 ms setting's error was 1.77x
-  hindsight's (1.16x once left out). A run that is a stop is taken back, as above.
+  the run is a stop only if the sample that ends it leaves every such joint where it was, and moves
+  no joint onwards by more than one interval could: joints that moved at every step and then keep
+  their positions over the run and the sample after it, the others moving on as before, have
+  stopped (a minimum-jerk move's end through 12 bits at 100 Hz: the joint creeps one encoder step a
+  sample into its target; taken as repeats, the run left a hole in every joint's samples, and the
+  default setting gave no estimate for 0.2 s at each such stop). Where no joint moved that steadily
+  (a joint slower than a step a sample, whose readings often repeat; a move's first change after a
+  rest), the run is a repeat only where the sample that ends it moves some joint onwards, in the
+  direction of its last change, by more than :data:`SPEEDING_UP` times its largest change between
+  the kept samples: the joint moved through the run's intervals, the run held its reading. On the
+  unseen estimator bench's fresh minimum-jerk moves at 150 Hz through 15 bits with 8 % repeats, a
+  repeat after a move's first two changes of two steps each, followed by one of 13, was fitted as a
+  stop, and the Kalman 20 ms setting's error was 1.77x hindsight's (1.16x once left out). A run that
+  is a stop is taken back, as above.
 
 No estimate of a stamp among a run is made before it is told from a stop (a repeat's stamp waits for
 the next sample kept, in every mode; another joint group's messages meanwhile release no estimate
@@ -93,16 +93,15 @@ def stopped(kept: np.ndarray, following: np.ndarray) -> bool:
     minimum-jerk moves at 100 Hz with 10 % repeats), or where no joint moved at every step, as after a
     move's first changes (1.77x on minimum-jerk moves at 150 Hz with 8 % repeats). A joint that turns
     back there does not tell: a slow joint's turning point holds its reading for a while."""
-    following = np.asarray(following)
-    onward = following - kept[-1]
-    if np.any(onward[moving_joints(kept)] != 0.0):
+    change = np.asarray(following) - kept[-1]
+    if np.any(change[moving_joints(kept)] != 0.0):
         return False
     changes = np.diff(kept, axis=0)
     largest = np.max(np.abs(changes), axis=0, initial=0.0)
-    changed = changes != 0.0
-    newest = len(changes) - 1 - np.argmax(changed[::-1], axis=0)  # per joint: its last change's step
+    newest = len(changes) - 1 - np.argmax(changes[::-1] != 0.0, axis=0)  # per joint: its last change's step
     direction = np.sign(changes[newest, np.arange(changes.shape[1])])  # 0 where it never changed
-    return not np.any((largest > 0.0) & (onward * direction > SPEEDING_UP * largest))
+    onward = change * direction  # > 0: in the direction of its last change
+    return not np.any((largest > 0.0) & (onward > SPEEDING_UP * largest))
 
 
 def repeated(positions: np.ndarray, starts: np.ndarray | None = None) -> np.ndarray:
