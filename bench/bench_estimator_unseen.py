@@ -6,13 +6,16 @@ and trapezoidal moves, gaits, 0.5 Hz and 3 Hz sines, at 100, 250 and 800 Hz (the
 and 1000), through 12 bits, 16 bits with 6 % of the samples repeated under a new stamp, and 14 bits
 with 10 % repeated. ``--cases fresh``: 90 more, seeds 53 and 97, 1.5 Hz and 5 Hz sines, trapezoidal and
 minimum-jerk moves and gaits at 150, 400 and 2000 Hz, through 13 bits, 18 bits with 3 % repeated and 15 bits
-with 8 % (first run on 2026-11-29: the relative rule in the estimators guide). Per case and
+with 8 % (first run on 2026-11-29: the relative rule in the estimators guide). ``--cases repeats``: 60
+more, seeds 201 and 202, minimum-jerk and trapezoidal moves, gaits, 1.5 Hz and 3 Hz sines at 120, 300 and
+600 Hz, through 14 bits with 5 % repeated and 17 bits with 10 % (first run on 2026-12-01, on the repeat rule
+of that day). Per case and
 setting: q-ddot's relative RMS error over the fresh samples (the repeats' stamps left out, as hindsight
 knows them) and its ratio to hindsight for the setting's delay; then each setting's median and worst
 ratio and its share of cases within the target (1.5).
 
 Usage: python bench/bench_estimator_unseen.py [--only default,kalman 20ms,kalman causal,polyfit causal]
-       [--cases unseen|fresh]
+       [--cases unseen|fresh|repeats]
 """
 
 from __future__ import annotations
@@ -37,6 +40,8 @@ CASES = {
     "unseen": (SEEDS, KINDS, RATES, ENCODERS),
     "fresh": ((53, 97), ("sines1.5", "sines5", "trapezoid", "gait", "minjerk"), (150, 400, 2000),
               ((13, 0.0), (18, 0.03), (15, 0.08))),
+    "repeats": ((201, 202), ("minjerk", "trapezoid", "gait", "sines1.5", "sines3"), (120, 300, 600),
+                ((14, 0.05), (17, 0.1))),
 }  # fmt: skip
 """Per set: seeds, motions, rates (Hz) and encoders."""
 
