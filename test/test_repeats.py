@@ -390,6 +390,12 @@ def test_the_speeding_up_repeat_test_fails_without_the_one_interval_clause(monke
         test_a_driver_s_repeat_as_one_joint_stops_and_another_speeds_up_stays_a_repeat()
 
 
+def moving_only(kept: np.ndarray) -> bool:
+    """The repeat rule's candidacy before 2026-12-01: an equal sample is a candidate only after a joint
+    that changed at every step or sped up (:func:`~neforward_ros.estimation.repeats.moving_joints`)."""
+    return bool(np.any(repeats.moving_joints(kept)))
+
+
 def first_change_repeat(rate: float, bits: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """(t, q, qdd, the repeat's index): :func:`move_start`'s move, read through ``bits``,
     where the driver repeats the first reading whose samples before it moved no joint at every step
@@ -429,11 +435,8 @@ def test_the_first_change_test_fails_when_only_moving_joints_make_repeats(monkey
     changed at every step or sped up (the rule before), the test above must fail."""
     from neforward_ros.estimation import history
 
-    def moving(kept: np.ndarray) -> bool:
-        return bool(np.any(repeats.moving_joints(kept)))
-
-    monkeypatch.setattr(repeats, "changing", moving)
-    monkeypatch.setattr(history, "changing", moving)
+    monkeypatch.setattr(repeats, "changing", moving_only)
+    monkeypatch.setattr(history, "changing", moving_only)
     with pytest.raises(AssertionError):
         test_a_repeat_after_a_move_s_first_change_is_left_out(StreamSettings(method="kalman"), 0.15)
 
@@ -486,7 +489,7 @@ def test_node_and_whole_recording_agree_on_a_coarse_encoder_s_equal_readings() -
     q = with_repeats(np.round(0.3 * q / step) * step, rng)
     fresh = ~repeated(q)
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(repeats, "changing", lambda kept: bool(np.any(repeats.moving_joints(kept))))
+        patch.setattr(repeats, "changing", moving_only)
         steady = ~repeated(q)
     told = np.count_nonzero(fresh != steady)
     equal = np.count_nonzero(np.all(q[1:] == q[:-1], axis=1))
