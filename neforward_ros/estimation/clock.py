@@ -221,6 +221,11 @@ class WriteClock:
         self._delay += (stamp - self._time - self._delay) / SETTLE
         return self.recovered
 
+    @property
+    def delay(self) -> float:
+        """ns: the stamps' mean delay after the recovered times (over about :data:`SETTLE` samples; 0 before a line)."""
+        return self._delay if self._line is not None else 0.0
+
     def _delay_above_line(self) -> float:
         """ns: the mean of the stamps kept above the newest line."""
         return float(np.mean(self._above(self._line)))
@@ -424,6 +429,11 @@ class SampleClock:
         self._untold: np.ndarray | None = None  # per joint, the least noise the last check read, where it told nothing
         self._unlooked = 0  # samples since the last check or look
         self._jittered = False  # whether an interval left whole usual intervals by more than JITTER of one
+        self.leaning = True
+        """Whether the newest check or look that could compare the two clocks (some joint reading noise on either) read
+        less position noise on the recovered clock's line than on the stamps, the median ratio over those joints (a
+        writer's moving arm reads far less, stamps of jittered samples more); True before any could (at rest, either
+        clock places the samples as well: :data:`~.kalman_bank.MIDWAY`)."""
         self.released_at: int | None = 0 if released else None
         """ns: the stamp of the sample from which the stream's estimates no longer wait for this clock (0: from
         the start, a restart's clock where the one before let them through; None: not yet). See
@@ -499,6 +509,13 @@ class SampleClock:
             return 0.0
         return self.clock.spread
 
+    def midway(self, stamp: int, recovered: int) -> int:
+        """ns: the time midway between a sample's stamp (ns) and its ``recovered`` time (ns, :meth:`add`'s), less
+        half the stamps' mean delay above the recovered clock: on average the stamp, off it by half the stamp's
+        own delay's deviation from the mean. Whichever of the two clocks is right, the sample is off it by half
+        the distance between them (:data:`~.kalman_bank.MIDWAY`)."""
+        return stamp - (stamp - recovered - round(self.clock.delay)) // 2
+
     def retimed(self, stamps: np.ndarray) -> np.ndarray:
         """The times (ns, float) of the samples stamped ``stamps`` (ns; samples fed, in order) on the
         recovered clock once the stamps are found to be write times: on the line the clock settled on
@@ -558,6 +575,9 @@ class SampleClock:
         on_clock = (self.retimed(np.array(stamps)) - first) / NS  # on the newest line
         noise, _ = noise_of(on_stamps, values, coloured=False)
         clock_noise, _ = noise_of(on_clock, values, coloured=False)
+        compared = np.maximum(noise, clock_noise) > LEAST_NOISE
+        if compared.any():  # (see leaning)
+            self.leaning = float(np.median(clock_noise[compared] / np.maximum(noise[compared], LEAST_NOISE))) < 1.0
         # Where the stamps' spread about the recovered clock, moved at the joint's speed, would stand out
         # of its noise on either clock, one of the two reads that spread as noise: the check tells.
         spread = float(np.std(on_stamps - on_clock))

@@ -96,6 +96,19 @@ times at 500 Hz; with it 13.7, 3.2 and 2.8 (``bench/bench_write_jitter.py --star
 :data:`~.clock.DECISIVE_LOOKS`). Tried on 2026-11-29 without the clock telling a swinging joint's stamps
 (:func:`~.clock.path_speed`), it held the family's 5 Hz sines at 100 Hz through 12 bits, stamped at their
 jittered samples, on the stamps' uncertainty for good: 0.52 -> 1.69 times hindsight's error."""
+MIDWAY = True
+"""Until the clock tells whether the stamps are the samples' times (while :attr:`~.clock.SampleClock.timing` is above
+0), and while its newest check read less noise on its line than on the stamps (:attr:`~.clock.SampleClock.leaning`,
+or before any could compare), the filters place each sample midway between its stamp and its time on the recovered
+clock's line, less half the stamps' mean delay above the line (:meth:`~.clock.SampleClock.midway`: on average at the
+stamps, so that going onto them or off them moves no sample by more than the noise it was taken to carry), and the
+stamps' uncertainty (:data:`BANK_TIMING_NOISE`) is half their spread: whichever clock is right, a sample's time is
+off by half the distance between them, where on the other it is off by all of it. From a start on write-time stamps
+after a rest, kalman 20 ms's worst error in the first second was 3.34 and 3.22 times its steady 99th percentile on
+the stamps (minimum-jerk moves at 100 and 500 Hz through 16 bits), 2.10 and 2.90 midway; 14.95 and 6.60 at 250 Hz
+(seeds 306 and 308), 6.62 and 3.32 (``bench/bench_write_jitter.py --start``). Midway whatever the checks read, the
+stamps of jittered samples that the clock never tells (12 bits at 100 Hz hide the jitter's motion) were off their
+times by half the jitter for good: 1.29 -> 1.44 times hindsight's q'' error (``test_write_clock.py``)."""
 UNCLOCKED = 256
 """Samples held for :data:`REPLAY_ON_CLOCK` until the clock tells (the newest; a stream kept on its stamps
 holds none)."""
@@ -161,6 +174,10 @@ class KalmanBank:
         self._velocities: deque[tuple[float, float, np.ndarray]] = deque(maxlen=NOISE_WINDOW)
         self.clock = clock or SampleClock()  # whether the stamps are write times, and the clock recovered from them
         self._models: deque[tuple[int, int]] = deque()  # (stamp, the filter's time) of the steps kept
+        self.placing = "stamps"
+        """Where the filters place the samples: on their stamps, "midway" between a stamp and its time on the
+        recovered clock's line until the clock tells (:data:`MIDWAY`), or on the "line" once the stamps are found
+        to be write times."""
         self._steps: dict[str, np.ndarray] = {}  # the smallest change seen so far, per joint: an encoder's step
         self.read_noise: dict[str, float] = {}  # the variances read from the samples so far
         self._unread = dict.fromkeys(("positions", "velocities"), 0)  # samples since the noise was read
@@ -192,6 +209,7 @@ class KalmanBank:
         going = self.written and not written
         if going or self.clock.placings != placings:  # (or the clock mended its count of periods)
             self._retime_noise_samples()
+        self.placing = self._placement()
         self._tune_noise(stamp, recovered, positions, velocities)  # (on the line, where going on it)
         if going:
             self._go_on_clock()
@@ -199,7 +217,17 @@ class KalmanBank:
             self._unclocked.append((stamp, np.array(positions, dtype=float), np.array(velocities, dtype=float)))
         elif self._unclocked:
             self._unclocked.clear()
-        self._step(stamp, recovered if self.written else stamp, positions, velocities, silence, usual)
+        placing = self.placing
+        time = stamp if placing == "stamps" else recovered if placing == "line" else self.clock.midway(stamp, recovered)
+        self._step(stamp, time, positions, velocities, silence, usual)
+
+    def _placement(self) -> str:
+        """Where the filters place the samples now (:attr:`placing`)."""
+        if self.clock.written:
+            return "line"
+        if MIDWAY and self.clock.timing > 0.0 and self.clock.leaning:
+            return "midway"
+        return "stamps"
 
     def _step(
         self, stamp: int, time: int, positions: np.ndarray, velocities: np.ndarray, silence: bool, usual: float | None
@@ -207,9 +235,11 @@ class KalmanBank:
         """The filters' step for the sample stamped ``stamp`` (ns) at ``time`` (ns: the stamp, or its time on
         the recovered clock), and the models' scores."""
         model = time
-        if self.written:  # the recovered time, after the filter's newest (which may be a stamp)
-            model = time if not self._models else max(time, self._models[-1][1] + TICK_NS)
-        self._models.append((stamp, model))
+        models = self._models
+        if models and (self.placing != "stamps" or models[-1][0] != models[-1][1]):
+            # the time placed (or a stamp after a placed one), after the filter's newest
+            model = max(time, models[-1][1] + TICK_NS)
+        models.append((stamp, model))
         previous = self.track.steps[-1].stamp if self.track.steps else None
         likelihoods = self.track.add(model, positions, velocities)
         errors = None if self.smooth else self._prediction_errors(previous, model, self.track.read, silence, usual)
@@ -442,8 +472,9 @@ class KalmanBank:
 
     def _model_of(self, stamp: int) -> int:
         """The filter's time (ns) of a stamp: the recovered time of the newest sample at or before it,
-        plus the time since; the stamp itself until the stamps are found to be write times."""
-        if not self.written:
+        plus the time since (placed midway until the clock tells: :data:`MIDWAY`); the stamp itself where the
+        samples are placed on their stamps."""
+        if self.placing == "stamps":
             return stamp
         for sample, model in reversed(self._models):
             if sample <= stamp:
@@ -466,6 +497,7 @@ class KalmanBank:
         bank.clock = self.clock.select(columns)
         bank._unclocked = deque(((s, p[columns], v[columns]) for s, p, v in self._unclocked), maxlen=UNCLOCKED)
         bank._models = deque(self._models)
+        bank.placing = self.placing
         bank._steps = {k: v[columns] for k, v in self._steps.items()}
         bank.revisions = None if self.revisions is None else self.revisions[columns]
         bank.errors = None if self.errors is None else self.errors[:, columns]
@@ -496,7 +528,9 @@ class KalmanBank:
             return self.read_noise[kind]
         self._unread[kind] = 0
         values = np.stack([v for _, _, v in samples])
-        times = np.array([r if self.written else t for t, r, _ in samples])
+        placing = self.placing  # (midway less half the stamps' mean delay: a constant, which says nothing of the noise)
+        halves = [0.5 * (t + r) for t, r, _ in samples] if placing == "midway" else None
+        times = np.array(halves or [r if placing == "line" else t for t, r, _ in samples])
         white, step = noise_of(times, values, coloured=False)
         seen = self._steps.get(kind)
         step = np.where(step > 0.0, step, np.inf)
@@ -521,7 +555,7 @@ class KalmanBank:
     def _go_on_clock(self) -> None:
         """As the stamps are found to be write times (the samples kept for the noise placed on the recovered
         clock's line and the noise read on them): the models scored afresh (their predictions so far were of
-        samples at the wrong times). With :data:`REPLAY_ON_CLOCK`, the filters start again from their prior
+        samples at other times). With :data:`REPLAY_ON_CLOCK`, the filters start again from their prior
         on the samples held since the start, each at its time on the line, and score the models on them."""
         self.scores = None
         if not REPLAY_ON_CLOCK or not self._unclocked:
@@ -578,7 +612,7 @@ class KalmanBank:
         if settings.noise == 0:
             self._positions.append((seconds, on_clock, np.asarray(positions, dtype=float).copy()))
             noise = self._noise("positions", self._positions, FALLBACK_NOISE)
-            timing = self.clock.timing
+            timing = self.clock.timing * (0.5 if self.placing == "midway" else 1.0)
             if BANK_TIMING_NOISE and timing > 0.0 and len(self._positions) > TIMING_STRIDE:
                 noise = max(noise, self._timing_variance(timing))
             self.track._noise = noise
