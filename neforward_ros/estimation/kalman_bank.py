@@ -528,9 +528,10 @@ class KalmanBank:
             return self.read_noise[kind]
         self._unread[kind] = 0
         values = np.stack([v for _, _, v in samples])
-        placing = self.placing  # (midway less half the stamps' mean delay: a constant, which says nothing of the noise)
-        halves = [0.5 * (t + r) for t, r, _ in samples] if placing == "midway" else None
-        times = np.array(halves or [r if placing == "line" else t for t, r, _ in samples])
+        if self.placing == "midway":  # (less half the stamps' mean delay, a constant that says nothing of the noise)
+            times = np.array([0.5 * (t + r) for t, r, _ in samples])
+        else:
+            times = np.array([r if self.placing == "line" else t for t, r, _ in samples])
         white, step = noise_of(times, values, coloured=False)
         seen = self._steps.get(kind)
         step = np.where(step > 0.0, step, np.inf)
