@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from neforward_ros.estimation import batch, degree_choice, native_fit
+from neforward_ros.estimation import adaptive, batch, degree_choice, native_fit
 from neforward_ros.estimation.batch import estimate_at
 from neforward_ros.estimation.degree_choice import DEGREES, LEAST, MEMORY, DegreePool, choose
 from neforward_ros.estimation.settings import StreamSettings
@@ -75,6 +75,52 @@ reading; no lower than 1, as until 2026-11-30, 1.68, 1.67 and 1.54)."""
 @pytest.mark.parametrize("case", STAIRCASES, ids=[f"{c[0]}-{c[1]:g}Hz-{c[2]}bits" for c in STAIRCASES])
 def test_a_staircase_from_a_coarse_encoder_takes_the_finer_fit_at_its_reading(case: tuple) -> None:
     assert default_ratio(*case) <= 1.5
+
+
+FAST_GAITS = [("gait", 110.0, 15, 81), ("gait", 100.0, 16, 73), ("gait", 90.0, 15, 403)]
+"""Gaits at 90-110 Hz, where degree 6's finer fit is often the smallest window the samples allow: its colour
+read off its distance to the rule's own window read the rule's bias and kept it out (1.62, 1.34 and 1.45 until
+2026-12-02; 1.32, 1.08 and 1.21 with no colour read there)."""
+
+
+def fast_gait_ratios() -> list[float]:
+    return [setting_ratio(StreamSettings(), *case, seconds=4.0) for case in FAST_GAITS]
+
+
+def test_a_finer_fit_at_the_smallest_window_reads_no_colour_off_the_rule_s() -> None:
+    assert max(fast_gait_ratios()) <= 1.35
+
+
+def test_its_colour_read_off_the_rule_s_window_fails_the_same_check(monkeypatch) -> None:
+    """The planted bug: the finer fit's colour read off its distance to the rule's window where it has no
+    smaller one (as until 2026-12-02), in numpy (the C fit's twin is compared with it elsewhere)."""
+    monkeypatch.setattr(native_fit.FIT, "get", lambda wait=False: None)
+    alike = adaptive.between_std
+    monkeypatch.setattr(adaptive, "between_std", lambda valid, chosen, stds, smaller=False: alike(valid, chosen, stds))
+    ratios = fast_gait_ratios()
+    assert max(ratios) > 1.5 and min(ratios) > 1.3, ratios
+
+
+REPEATING_GAITS = [("gait", 90.0, 17, 402, 0.04), ("gait", 100.0, 18, 11, 0.05), ("gait", 90.0, 15, 402, 0.04)]
+"""Gaits at 90-100 Hz from a driver that repeats 4-5 % of its samples: the finer fit's colour reads over 2 (its
+distance to a yet smaller window), but the reference's reads over GROWTH times as much, as a bias grows with the
+window (0.77, 0.95 and 0.83; with the finer's reading taken as its colour whatever the reference's reads, as
+until 2026-12-02, 1.27, 1.34 and 1.29)."""
+
+
+def repeating_gait_ratios() -> list[float]:
+    return [setting_ratio(StreamSettings(), *case[:4], seconds=4.0, repeats=case[4]) for case in REPEATING_GAITS]
+
+
+def test_distances_growing_as_a_bias_leave_the_finer_fit_s_noise_white() -> None:
+    assert max(repeating_gait_ratios()) <= 1.1
+
+
+def test_its_reading_taken_as_colour_whatever_the_growth_fails_the_same_check(monkeypatch) -> None:
+    """The planted bug: no growth is a bias's (:data:`~.degree_choice.GROWTH` infinite), as until 2026-12-02."""
+    monkeypatch.setattr(degree_choice, "GROWTH", float("inf"))
+    ratios = repeating_gait_ratios()
+    assert min(ratios) > 1.2, ratios
 
 
 def test_an_encoder_read_at_about_a_step_a_sample_keeps_its_noise() -> None:
@@ -283,7 +329,7 @@ def test_a_finer_fit_whose_window_reads_a_coloured_noise_is_no_candidate(monkeyp
         if library is not None:
             compiled, _ = native_fit.choose_degrees(library, stamps, round(MEMORY * 1e9), accelerations, stated,
                                                     noise, between, counted, LEAST, degree_choice.GAMMA,
-                                                    degree_choice.STRAIN, True, white,
+                                                    degree_choice.STRAIN, True, white, degree_choice.GROWTH,
                                                     round(degree_choice.RECORD * 1e9),
                                                     round(degree_choice.HOLE * 1e9))  # fmt: skip
             np.testing.assert_array_equal(compiled, got)
@@ -322,7 +368,7 @@ def test_the_finer_fit_waits_until_a_gap_has_left_the_record(monkeypatch) -> Non
             compiled, _ = native_fit.choose_degrees(library, stamps, round(MEMORY * 1e9), accelerations, stated,
                                                     noise, between, counted, LEAST, degree_choice.GAMMA,
                                                     degree_choice.STRAIN, True, degree_choice.WHITE,
-                                                    round(degree_choice.RECORD * 1e9),
+                                                    degree_choice.GROWTH, round(degree_choice.RECORD * 1e9),
                                                     round(hole * 1e9))  # fmt: skip
             np.testing.assert_array_equal(compiled, got)
         pool = DegreePool(joints, len(accelerations))
@@ -369,7 +415,7 @@ def compiled_against_pool() -> None:
     got, got_std = native_fit.choose_degrees(
         library, stamps, round(MEMORY * 1e9), *(fits[:, :, k].transpose(1, 0, 2) for k in (2, 3, 5, 6)), counted,
         LEAST, degree_choice.GAMMA, degree_choice.STRAIN, degree_choice.FINER, degree_choice.WHITE,
-        round(degree_choice.RECORD * 1e9), round(degree_choice.HOLE * 1e9),
+        degree_choice.GROWTH, round(degree_choice.RECORD * 1e9), round(degree_choice.HOLE * 1e9),
     )  # fmt: skip
     pool = DegreePool(joints, len(accelerations))
     for k in range(count):

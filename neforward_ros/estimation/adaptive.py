@@ -467,13 +467,20 @@ def stated_std(estimates: np.ndarray, valid: np.ndarray, chosen: np.ndarray, std
     return np.where(found, np.sqrt(std * std + apart * apart), std)
 
 
-def between_std(valid: np.ndarray, chosen: np.ndarray, stds: np.ndarray) -> np.ndarray:
+def between_std(
+    valid: np.ndarray, chosen: np.ndarray, stds: np.ndarray, smaller: bool | np.ndarray = False
+) -> np.ndarray:
     """The deviation that the noise alone puts between the chosen level's estimate and the level
     :func:`stated_std` measures its distance to (...): the root of the difference of their noise's
     variances (``stds`` (L, ...), each level's; the chosen fit is the best one on the samples both
     windows hold, so the other differs from it by the rest); 0 where only one level is valid. What of
-    that distance lies beyond it is the noise's colour or a bias (:mod:`.degree_choice`)."""
+    that distance lies beyond it is the noise's colour or a bias (:mod:`.degree_choice`). ``smaller``
+    (one for all, or per target (M,) for (L, M, n)): 0 also where the chosen level is the smallest (the
+    finer fit's: its distance to a larger window reads that window's bias, not the finer's colour)."""
     other, found = _neighbour(valid, chosen)
+    if np.any(smaller):
+        below = np.reshape(smaller, np.shape(smaller) + (1,) * (np.ndim(chosen) - np.ndim(smaller)))
+        found = found & (~below | (other[0] > chosen))
     own, theirs = np.take_along_axis(stds, chosen[None], 0)[0], np.take_along_axis(stds, other, 0)[0]
     return np.where(found, np.sqrt(np.abs(theirs * theirs - own * own)), 0.0)
 
@@ -935,7 +942,8 @@ def _block_fits(
     pick = chosen[None]
     picked = [np.take_along_axis(np.stack([f[i] for f in fits]), pick, 0)[0] for i in range(3)]
     noise = np.take_along_axis(stds, pick, 0)[0]
-    return [*picked, noise, stated_std(estimates, valid, chosen, noise), between_std(valid, chosen, stds)]
+    between = between_std(valid, chosen, stds, smaller=finer)
+    return [*picked, noise, stated_std(estimates, valid, chosen, noise), between]
 
 
 def adaptive_fit(
@@ -1082,5 +1090,5 @@ def _numpy_fit(
         noise,
         strained,
         stated_std(estimates, usable, chosen, noise),
-        between_std(usable, chosen, stds),
+        between_std(usable, chosen, stds, smaller=finer),
     )

@@ -231,7 +231,7 @@ def _chosen_block(
         chosen, std = native_fit.choose_degrees(library, stamps_ns, round(degree_choice.MEMORY * NS), options[2],
                                                 *options[3:], counted, degree_choice.LEAST, GAMMA,
                                                 degree_choice.STRAIN, finer, degree_choice.WHITE,
-                                                round(degree_choice.RECORD * NS),
+                                                degree_choice.GROWTH, round(degree_choice.RECORD * NS),
                                                 round(degree_choice.HOLE * NS))  # fmt: skip
     else:
         chosen, std = degree_choice.choose(stamps_ns, *(np.where(counted, option, np.nan) for option in options[2:]),

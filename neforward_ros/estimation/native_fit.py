@@ -255,9 +255,10 @@ static int level_fit(const double *sums, const double *moments, long n, long ord
 /* Column j of level `level`'s fit among the `valid` levels' fits (valid, n, 5) into out (7, n): value, first
    and second derivative, stated standard deviation (its noise and the distance to the next smaller valid
    level's estimate in quadrature; where it is the smallest, to the next larger one's), `strained`, its noise's
-   standard deviation and the deviation that noise alone puts between the two estimates. */
+   standard deviation and the deviation that noise alone puts between the two estimates (0 where `below`
+   and there is no smaller level: the finer fit's, see between_std in adaptive.py). */
 static void emit(const double *fits, long valid, long n, long j, long level, long derivative, int strained,
-                 double *out) {
+                 int below, double *out) {
     const double *fit = fits + (level * n + j) * 5;
     for (long k = 0; k < 4; k++) out[k * n + j] = fit[k];
     out[6 * n + j] = 0.0;
@@ -267,7 +268,7 @@ static void emit(const double *fits, long valid, long n, long j, long level, lon
         long k = derivative == 2 ? 2 : 1;
         double apart = fit[k] - neighbour[k];
         out[3 * n + j] = sqrt(fit[3] * fit[3] + apart * apart);
-        out[6 * n + j] = sqrt(fabs(neighbour[3] * neighbour[3] - fit[3] * fit[3]));
+        if (!below || other > level) out[6 * n + j] = sqrt(fabs(neighbour[3] * neighbour[3] - fit[3] * fit[3]));
     }
     out[4 * n + j] = strained ? 1.0 : 0.0;
     out[5 * n + j] = fit[3];
@@ -309,11 +310,12 @@ static void choose(double *fits, long valid, long n, const long *lo, const long 
         if (chosen < 0) chosen = 0;
         long smallest_level = valid - 1;
         int strained = (chosen == smallest_level && smallest_level > 0) || white[j] > roughness * spread[j];
-        emit(fits, valid, n, j, chosen, derivative[j], strained, out);
+        emit(fits, valid, n, j, chosen, derivative[j], strained, 0, out);
         noise[j] = out[5 * n + j];
         /* the next smaller window's (the rule's strain is this one's too) */
         if (finer != NULL)
-            emit(fits, valid, n, j, shift && chosen + 1 < valid ? chosen + 1 : chosen, derivative[j], strained, finer);
+            emit(fits, valid, n, j, shift && chosen + 1 < valid ? chosen + 1 : chosen, derivative[j], strained, 1,
+                 finer);
     }
 }
 
@@ -733,7 +735,7 @@ static void degree_scores(long ndeg, const double *a, long acc_g, const double *
     for (long r = 0; r < 2; r++) {
         long g = r < ndeg ? r : 0;
         double own = s[g * std_g], noise = v[g * noise_g], between = w[g * between_g];
-        score[2 * ndeg + 2 * r] = finite ? nmax(own * own - noise * noise, 0.0) : 0.0;
+        score[2 * ndeg + 2 * r] = finite && between > 0.0 ? nmax(own * own - noise * noise, 0.0) : 0.0;
         score[2 * ndeg + 2 * r + 1] = finite ? between * between : 0.0;
     }
     score[2 * ndeg + 4] = finite ? 1.0 : 0.0;
@@ -747,8 +749,8 @@ static void degree_scores(long ndeg, const double *a, long acc_g, const double *
    (degree_choice._least). */
 static void decide(long ndeg, long n, const double *total, double count, const double *a, long acc_g,
                    const double *s, long std_g, const double *v, long noise_g, const double *w, long between_g,
-                   int counted, long least, double gamma, double strain, int finer, double white, int aged,
-                   long *chosen, double *stated) {
+                   int counted, long least, double gamma, double strain, int finer, double white, double growth,
+                   int aged, long *chosen, double *stated) {
     long first = finer && ndeg > 1 ? 1 : 0;  /* the reference */
     double number = count > 1.0 ? count : 1.0, expected = total[(2 * ndeg + 1 + 2 * first) * n];
     double colour = expected > 0.0 ? nmax(total[(2 * ndeg + 2 * first) * n] / expected, 1.0) : 1.0;
@@ -790,6 +792,7 @@ static void decide(long ndeg, long n, const double *total, double count, const d
     *stated = sqrt(nmax(colour * noise * noise + beside + beyond, error));
     expected = total[(2 * ndeg + 1) * n];
     double reading = expected > 0.0 ? total[2 * ndeg * n] / expected : 1.0;
+    if (colour > growth * nmax(reading, 1.0)) reading = 1.0;  /* the distances grow as a bias does */
     /* (the same fit as degree 1's where its rule chose its smallest window: no candidate) */
     if (!first || !enough || !aged || !counted || reading > white || (a[0] == a[acc_g] && v[0] == v[noise_g]))
         return;
@@ -798,8 +801,8 @@ static void decide(long ndeg, long n, const double *total, double count, const d
        of their coloured variances, at the colour the finer's window reads, below 1 too) */
     double tint = nmax(reading, 1.0), mine = total[ndeg * n] / number, rule = total[(ndeg + 1) * n] / number;
     double gain = best_score - 2.0 * colour * rule + total[n] / number - 2.0 * reading * (mine - rule);
-    double finest = s[0], quiet = v[0], apart_f = w[0];
-    if (gain <= 0.0 || finest * finest > strain * strain * tint * mine) return;
+    double finest = s[0], quiet = v[0], apart_f = w[0], read = apart_f > 0.0 ? finest : quiet;
+    if (gain <= 0.0 || read * read > strain * strain * tint * mine) return;
     *chosen = 0;
     *stated = sqrt(nmax(tint * quiet * quiet + nmax(finest * finest - quiet * quiet - tint * apart_f * apart_f, 0.0),
                         tint * mine));
@@ -818,7 +821,7 @@ void choose_degrees(long m, long ndeg, long n, const long long *stamps, long lon
                     long acc_g, long acc_t, const double *std, long std_g, long std_t, const double *noise,
                     long noise_g, long noise_t, const double *between, long between_g, long between_t,
                     const unsigned char *counted, long least, double gamma, double strain, int finer, double white,
-                    long long record, long long hole, double precision, long refresh, long *chosen,
+                    double growth, long long record, long long hole, double precision, long refresh, long *chosen,
                     double *stated) {
     long sums = 2 * ndeg + 4, row = sums + 1;  /* each estimate's terms (m, n, row), whether it counts last */
     double *scores = malloc(sizeof(double) * ((size_t)m * n * row + (size_t)(2 * sums + 1) * n));
@@ -861,7 +864,7 @@ void choose_degrees(long m, long ndeg, long n, const long long *stamps, long lon
         for (long j = 0; j < n; j++)
             decide(ndeg, n, total + j, count[j], acc + t * acc_t + j, acc_g, std + t * std_t + j, std_g,
                    noise + t * noise_t + j, noise_g, between + t * between_t + j, between_g, counted[t * n + j],
-                   least, gamma, strain, finer, white, first >= after && stamps[t] - stamps[first] >= record,
+                   least, gamma, strain, finer, white, growth, first >= after && stamps[t] - stamps[first] >= record,
                    chosen + t * n + j, stated + t * n + j);
     }
     free(scores);
@@ -874,7 +877,8 @@ void choose_degrees(long m, long ndeg, long n, const long long *stamps, long lon
    degree_choice.RECORD with no hole (see decide). */
 void choose_last(long m, long ndeg, long n, double *scores, const double *acc, const double *std,
                  const double *noise, const double *between, const unsigned char *counted, long least,
-                 double gamma, double strain, int finer, double white, int aged, long *chosen, double *stated) {
+                 double gamma, double strain, int finer, double white, double growth, int aged, long *chosen,
+                 double *stated) {
     long width = 2 * ndeg + 5, row = width * n;
     double total[(9 + 2 * MAX_ALSO) * n], score[9 + 2 * MAX_ALSO];
     if (ndeg > 2 + MAX_ALSO || m < 1) return;
@@ -890,7 +894,7 @@ void choose_last(long m, long ndeg, long n, double *scores, const double *acc, c
     }
     for (long j = 0; j < n; j++)
         decide(ndeg, n, total + j, total[(width - 1) * n + j], acc + j, n, std + j, n, noise + j, n, between + j,
-               n, counted[j], least, gamma, strain, finer, white, aged, chosen + j, stated + j);
+               n, counted[j], least, gamma, strain, finer, white, growth, aged, chosen + j, stated + j);
 }
 """
 
@@ -968,11 +972,12 @@ def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
     library.causal_candidates.restype = None
     library.choose_degrees.argtypes = [long, long, long, pointer, ctypes.c_longlong, pointer, long, long, pointer,
                                        long, long, pointer, long, long, pointer, long, long, pointer, long, double,
-                                       double, ctypes.c_int, double, ctypes.c_longlong, ctypes.c_longlong, double,
-                                       long, pointer, pointer]  # fmt: skip
+                                       double, ctypes.c_int, double, double, ctypes.c_longlong, ctypes.c_longlong,
+                                       double, long, pointer, pointer]  # fmt: skip
     library.choose_degrees.restype = None
     library.choose_last.argtypes = [long, long, long, pointer, pointer, pointer, pointer, pointer, pointer, long,
-                                    double, double, ctypes.c_int, double, ctypes.c_int, pointer, pointer]  # fmt: skip
+                                    double, double, ctypes.c_int, double, double, ctypes.c_int, pointer,
+                                    pointer]  # fmt: skip
     library.choose_last.restype = None
     native_kalman.declare(library)
     return library
@@ -1135,6 +1140,7 @@ def choose_degrees(
     strain: float,
     finer: bool,
     white: float,
+    growth: float,
     record_ns: int,
     hole_ns: int,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -1142,8 +1148,10 @@ def choose_degrees(
     at each estimate (M, n) and the standard deviation stated with it (M, n), from every degree's
     accelerations, stated deviations, noise's deviations and the noise's deviations between each and
     its neighbouring window (D, M, n) (any strides, a joint's entries adjacent), which of them count
-    (M, n), at the stamps (M,), integer ns, increasing; ``finer``, ``white``: whether the first is the
-    finer fit, the most colour it may read (:data:`~.degree_choice.WHITE`), and the least span of a window's
+    (M, n), at the stamps (M,), integer ns, increasing; ``finer``, ``white``, ``growth``: whether the first is
+    the finer fit, the most colour it may read (:data:`~.degree_choice.WHITE`), how much more the colour its
+    reference reads must be for the finer's reading to count as a bias (:data:`~.degree_choice.GROWTH`), and
+    the least span of a window's
     estimates for it and the longest interval between them (:data:`~.degree_choice.RECORD`,
     :data:`~.degree_choice.HOLE`, ns)."""
     item = accelerations.itemsize
@@ -1160,7 +1168,8 @@ def choose_degrees(
                            stated.strides[0] // item, stated.strides[1] // item, noise.ctypes.data,
                            noise.strides[0] // item, noise.strides[1] // item, between.ctypes.data,
                            between.strides[0] // item, between.strides[1] // item, mask.ctypes.data, least, gamma,
-                           strain, int(finer), white, int(record_ns), int(hole_ns), CHOICE_PRECISION, CHOICE_REFRESH,
+                           strain, int(finer), white, growth, int(record_ns), int(hole_ns), CHOICE_PRECISION,
+                           CHOICE_REFRESH,
                            chosen.ctypes.data, out.ctypes.data)  # fmt: skip
     return chosen, out
 
@@ -1178,6 +1187,7 @@ def choose_last(
     strain: float,
     finer: bool,
     white: float,
+    growth: float,
     aged: bool,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The C function's choice for the node (:class:`neforward_ros.estimation.degree_choice.DegreePool`):
@@ -1185,7 +1195,8 @@ def choose_last(
     (W, 2 D + 5, n), contiguous: the window's estimates' terms (:func:`~.degree_choice.terms`) and
     whether each counts (the last row is written here, from the last estimate's accelerations, stated
     deviations, noise's deviations and those between each and its neighbour (D, n) and which count
-    (n,), uint8); their sums added up directly. ``finer``, ``white``: as for :func:`choose_degrees`; ``aged``:
+    (n,), uint8); their sums added up directly. ``finer``, ``white``, ``growth``: as for :func:`choose_degrees`;
+    ``aged``:
     whether the window's estimates span :data:`~.degree_choice.RECORD` with no hole (:data:`~.degree_choice.HOLE`)."""
     rows, degrees, n = scores.shape[0], (scores.shape[1] - 5) // 2, scores.shape[2]
     accelerations = np.ascontiguousarray(accelerations, dtype=float)
@@ -1196,7 +1207,7 @@ def choose_last(
     out = np.full(n, np.nan)  # an empty window (none begun) states nothing
     library.choose_last(rows, degrees, n, scores.ctypes.data, accelerations.ctypes.data, stated.ctypes.data,
                         noise.ctypes.data, between.ctypes.data, counted.ctypes.data, least, gamma, strain,
-                        int(finer), white, int(aged), chosen.ctypes.data, out.ctypes.data)  # fmt: skip
+                        int(finer), white, growth, int(aged), chosen.ctypes.data, out.ctypes.data)  # fmt: skip
     return chosen, out
 
 
