@@ -197,15 +197,18 @@ def test_from_the_first_second_a_100_hz_writer_reads_as_its_samples(kind, bits, 
     """The default and kalman 20 ms on a 100 Hz writer through 16 bits, from 1 s on (the fits' warm-up):
     within 1.6x the error at the samples' stamps (9-31x before the clock re-timed them; the default's gait
     1.478x until 2026-11-29, 1.505x since that day's degree choice: the same error at the samples' stamps,
-    1.8 % more on the written ones, some estimates better, some worse). Found at about 0.64 s, the samples held
-    (the history's, the bank's noise window) are placed on the recovered clock's line then, and the
+    1.8 % more on the written ones, some estimates better, some worse); the default's gait within 1.8x since
+    2026-12-02, 1.754x: at the samples' stamps the degree choice takes the finer fit more (0.701 -> 0.592 %),
+    on the written ones, re-timed to the line, about as before (1.055 -> 1.038 %). Found at about 0.64 s, the
+    samples held (the history's, the bank's noise window) are placed on the recovered clock's line then, and the
     bank's models scored afresh. Through 20 bits the line drawn from a second of stamps is not yet fine
     enough (sines, delays to 0.2 of a period: 3.5x and 3.0x from 1 s on, about 1x from 4 s on)."""
     t, written, measured, qdd = _writer(kind, 100.0, bits, longest, seed)
     settings = StreamSettings(method=method)
     on_samples, _ = error(t, measured, qdd, t, settings, settled=1.0)
     on_writes, _ = error(written, measured, qdd, t, settings, settled=1.0)
-    assert on_writes <= 1.6 * on_samples, (on_writes, on_samples)
+    bound = 1.8 if (kind, method) == ("gait", "polyfit") else 1.6
+    assert on_writes <= bound * on_samples, (on_writes, on_samples)
 
 
 @pytest.mark.parametrize("jitter, bits", [(0.05, 16), (0.1, 12), (0.2, 20)])
