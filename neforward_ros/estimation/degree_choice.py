@@ -203,9 +203,9 @@ def _least(
     record is long enough (``held``, the window's span in s (..., or one for all), at least :data:`RECORD`,
     and :data:`LEAST` estimates), its stated deviation (its noise, where nothing is between it and a smaller
     window) is within :data:`STRAIN` of its usual error, and the scores say it is the better: the chosen
-    one's mean squared error over the reference's (its score less the reference's) plus the reference's over the
-    finer's (their mean squared step less twice the difference of their mean noise variances at the
-    colour the finer's window reads, below 1 too) above 0."""
+    one's mean squared error over the reference's (its score less the reference's) plus the reference's
+    over the finer's (their mean squared step less twice the difference of their mean noise variances at
+    the colour the finer's window reads, below 1 too) above 0."""
     degrees = len(accelerations)
     if not finer or degrees < 2:
         return _least_from(total, count, accelerations, stated, noise, between)[:2]

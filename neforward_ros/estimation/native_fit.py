@@ -1151,9 +1151,8 @@ def choose_degrees(
     (M, n), at the stamps (M,), integer ns, increasing; ``finer``, ``white``, ``growth``: whether the first is
     the finer fit, the most colour it may read (:data:`~.degree_choice.WHITE`), how much more the colour its
     reference reads must be for the finer's reading to count as a bias (:data:`~.degree_choice.GROWTH`), and
-    the least span of a window's
-    estimates for it and the longest interval between them (:data:`~.degree_choice.RECORD`,
-    :data:`~.degree_choice.HOLE`, ns)."""
+    the least span of a window's estimates for it and the longest interval between them
+    (:data:`~.degree_choice.RECORD`, :data:`~.degree_choice.HOLE`, ns)."""
     item = accelerations.itemsize
     for array in (accelerations, stated, noise, between):
         if array.dtype != np.float64 or array.strides[2] != item or any(x % item for x in array.strides):
@@ -1169,8 +1168,7 @@ def choose_degrees(
                            noise.strides[0] // item, noise.strides[1] // item, between.ctypes.data,
                            between.strides[0] // item, between.strides[1] // item, mask.ctypes.data, least, gamma,
                            strain, int(finer), white, growth, int(record_ns), int(hole_ns), CHOICE_PRECISION,
-                           CHOICE_REFRESH,
-                           chosen.ctypes.data, out.ctypes.data)  # fmt: skip
+                           CHOICE_REFRESH, chosen.ctypes.data, out.ctypes.data)  # fmt: skip
     return chosen, out
 
 
@@ -1196,8 +1194,8 @@ def choose_last(
     whether each counts (the last row is written here, from the last estimate's accelerations, stated
     deviations, noise's deviations and those between each and its neighbour (D, n) and which count
     (n,), uint8); their sums added up directly. ``finer``, ``white``, ``growth``: as for :func:`choose_degrees`;
-    ``aged``:
-    whether the window's estimates span :data:`~.degree_choice.RECORD` with no hole (:data:`~.degree_choice.HOLE`)."""
+    ``aged``: whether the window's estimates span :data:`~.degree_choice.RECORD` with no hole
+    (:data:`~.degree_choice.HOLE`)."""
     rows, degrees, n = scores.shape[0], (scores.shape[1] - 5) // 2, scores.shape[2]
     accelerations = np.ascontiguousarray(accelerations, dtype=float)
     stated = np.ascontiguousarray(stated, dtype=float)
