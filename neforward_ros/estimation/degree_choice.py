@@ -188,6 +188,7 @@ def _least(
     between: np.ndarray,
     finer: bool = False,
     held: np.ndarray | float = 0.0,
+    record: float = RECORD,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The degree index (..., n) with the least mean score and the standard deviation stated with its
     estimate (..., n), from the sums of :func:`terms` over the window (``total`` (..., 2 D + 4, n), the
@@ -200,7 +201,7 @@ def _least(
     ``finer``: the first is the finer fit. The others are chosen among themselves as above, the second
     their reference and its colour read; the finer fit takes the place of the one chosen where its own
     colour reads at most :data:`WHITE` (1 where the reference's reads over :data:`GROWTH` times it), its
-    record is long enough (``held``, the window's span in s (..., or one for all), at least :data:`RECORD`,
+    record is long enough (``held``, the window's span in s (..., or one for all), at least ``record`` s,
     and :data:`LEAST` estimates), its stated deviation (its noise, where nothing is between it and a smaller
     window) is within :data:`STRAIN` of its usual error, and the scores say it is the better: the chosen
     one's mean squared error over the reference's (its score less the reference's) plus the reference's
@@ -222,7 +223,7 @@ def _least(
     gain = score - 2.0 * colour * rule + total[..., 1, :] / number - 2.0 * reading * (mine - rule)
     finest, quiet, apart = stated[0], noise[0], between[0]
     other = (accelerations[0] != accelerations[1]) | (noise[0] != noise[1])  # (not the rule's smallest window)
-    aged = np.asarray(held)[..., None] >= RECORD
+    aged = np.asarray(held)[..., None] >= record
     take = (count[..., 0, :] >= LEAST) & aged & (reading <= WHITE) & (gain > 0.0) & other
     told = np.where(apart > 0.0, finest, quiet)  # (its stated deviation, where read against a smaller window)
     take &= told * told <= STRAIN**2 * tint * mine
@@ -313,9 +314,10 @@ class DegreePool:
     last second's score terms are kept and summed directly at each choice (in C once compiled,
     :func:`~.native_fit.choose_last`; the whole recording's sliding sums agree to about 1e-12)."""
 
-    def __init__(self, joints: int, candidates: int | None = None) -> None:
+    def __init__(self, joints: int, candidates: int | None = None, record: float = RECORD) -> None:
         # the last second's estimates: their terms (terms), then whether counted
         self._finer = FINER
+        self._record_ns = round(record * NS)  # the least span of a record for the finer fit (RECORD)
         options = len(DEGREES) + self._finer if candidates is None else candidates
         self._rows = StampedRows(round(MEMORY * NS), (2 * options + 5, joints))
         self._accelerations = np.zeros((options, joints))  # the estimate begun's
@@ -378,11 +380,11 @@ class DegreePool:
                 self._finer,
                 WHITE,
                 GROWTH,
-                held_ns >= round(RECORD * NS),
+                held_ns >= self._record_ns,
             )
             return chosen[joints], std[joints]
         rows, counted = terms(accelerations, stated, noise, between)
         window[-1, :-1, joints], window[-1, -1, joints] = rows.T, counted[0]
         total = np.add.reduce(window[:, :, joints], axis=0)
         return _least(total[:-1], total[-1:], accelerations, stated, noise, between, self._finer,
-                      held_ns / NS)  # fmt: skip
+                      held_ns / NS, self._record_ns / NS)  # fmt: skip

@@ -106,6 +106,21 @@ record (its root mean square error). The fits alone served there until 2026-11-2
 through 20 bits the best fit's error is about 3x the 0.25 s model's, which is chosen once its record is fair,
 0.8 s after a start, and the worst error in the second after a start or a time reset was up to 3.5x the steady
 99th percentile on 20 ms (``bench/bench_transients.py``)."""
+REFERENCE_CHOSEN = True
+"""The centred estimate the causal candidates (and the bank's models) are scored against is the default's own:
+each degree's rule and the finer fit, the degree chosen per joint by the reference's last second
+(:mod:`.degree_choice`; a joint fitted on its velocities by their first derivative). Until 2026-12-02 it was
+the adaptive rule's degree 6 fused with 4, whose bias on fast gaits at low rates is like the short-delay
+fits': kalman 20 ms chose those over the bank's fastest model, up to 3.1x hindsight at 90 Hz through 15-17
+bits where that model alone is 0.6x; on 54 gaits at 90-140 Hz, 18 over 1.5x before, 10 since (see the
+estimators guide, "The candidates scored against the default's own estimate")."""
+REFERENCE_RECORD = 0.25
+"""s: the least span of the reference's record for its finer fit (the default's :data:`~.degree_choice.RECORD`,
+0.75 s, for its own estimates). From a start the candidates' records are made against the first second's
+references: with 0.75 s, on a gait at 500 Hz through 12 bits, the rule's degree 6 served as the reference
+for 0.85 s and kalman 20 ms's worst error in the second after the start was 18 rad/s^2, 3.96x its steady
+99th percentile (4.6; the first estimates' error as before the reference was chosen, whose p99 was 12.2);
+with 0.25 s, 1.21x (``bench/bench_transients.py``)."""
 BANK_HOLDS_ITS_OVERRULING = True
 """kalman, fixed lag: where the bank's own estimate overruled a joint's chosen candidate at the last target,
 the candidate returns only where it agrees with the bank's within the deviation the bank stated over the last
@@ -195,6 +210,7 @@ class StreamingEstimator:
             self._degrees = degree_choice.DegreePool(len(self.joint_names))
         # polyfit's causal adaptive fits: the candidate chosen by its errors half a window ago (.causal_choice)
         self._scores: ErrorScores | None = None
+        self._reference_degrees: degree_choice.DegreePool | None = None
         # every candidate's estimates at the target being estimated and their floors (see ErrorScores.score),
         # where kept for scoring (else None)
         self._candidates: np.ndarray | None = None
@@ -224,6 +240,10 @@ class StreamingEstimator:
             count = len(DEGREES) * len(self._half_widths) + self._models
             self._scores = ErrorScores(len(self.joint_names), count, half, round(half * NS))
             self._reference_support = StreamSettings(window=self.settings.window).support
+            # the reference's own degree choice, as the default's (REFERENCE_CHOSEN): its record of the
+            # reference's estimates, in their stamps' order
+            if REFERENCE_CHOSEN:
+                self._reference_degrees = degree_choice.DegreePool(len(self.joint_names), record=REFERENCE_RECORD)
         self._intervals: deque[int] = deque(maxlen=8)  # the last stamp intervals, ns
         # Per joint, how hard the estimator strains (see _watch_windows, _watch_innovations).
         self._strain = np.zeros(len(self.joint_names))
@@ -291,8 +311,9 @@ class StreamingEstimator:
         self._pending.clear()
         if self._pool is not None:
             self._pool.clear()
-        if self._degrees is not None:
-            self._degrees.clear()
+        for pool in (self._degrees, self._reference_degrees):
+            if pool is not None:
+                pool.clear()
         self._forget_scores(None, keep_record=CARRY_RECORDS)
         self._intervals.clear()
         self._clock = None
@@ -418,8 +439,9 @@ class StreamingEstimator:
             group.append(stamp, *sample, self._hole_ns)
             if group.written and not written:  # its samples now on the recovered clock: the records of the
                 self._forget_scores(group.joints)  # causal candidates and of the default's degrees were made on
-                if self._degrees is not None:  # the stamps'
-                    self._degrees.forget(group.joints)
+                for pool in (self._degrees, self._reference_degrees):  # the stamps'
+                    if pool is not None:
+                        pool.forget(group.joints)
                 if group.clock.released_at == stamp:  # found as the start waited for the clock: the start
                     self._recordless[group.joints] = True  # waits for a record on the recovered clock too
             self._watch_innovations(group)
@@ -821,6 +843,8 @@ class StreamingEstimator:
         """Score the candidates' estimates that are now half a window old against the centred fit there."""
         for stamp, estimates, floors in self._scores.due(now):
             reference = np.full(len(self.joint_names), np.nan)
+            if self._reference_degrees is not None:
+                self._reference_degrees.start(stamp)
             for group in self._groups:
                 reference[group.joints], changed = self._reference(stamp, group)
                 self._record_moved[group.joints] += changed
@@ -839,9 +863,17 @@ class StreamingEstimator:
         times, positions, velocities, by_velocity, before = self._samples(group, stamp - half_ns, stamp + half_ns)
         values = np.where(by_velocity, velocities, positions)
         derivative = np.where(by_velocity, 1, 2)
-        order, lower = degrees(None, True, False)
         at = group.time_of(stamp)
-        _, d1, d2, _, _ = adaptive_fit(times, values, at, half, order, half, derivative, lower)
+        if self._reference_degrees is not None:  # each degree's rule, chosen per joint by its record
+            fits = degree_fit(
+                times, values, at, half, degree_choice.DEGREES, half, derivative, finer=degree_choice.FINER
+            )
+            accelerations = np.where(by_velocity, fits[1], fits[2])  # (a joint fitted on its velocities: their first)
+            chosen, _ = self._reference_degrees.choose(np.asarray(group.joints), accelerations, fits[3], *fits[5:])
+            d1, d2 = (degree_choice.pick(x, chosen) for x in (fits[1], fits[2]))
+        else:
+            order, lower = degrees(None, True, False)
+            _, d1, d2, _, _ = adaptive_fit(times, values, at, half, order, half, derivative, lower)
         upto = before + int(times[before:].searchsorted(at, side="right"))  # the estimate's side
         changed = (values[before:upto] != values[before]).any(axis=0)
         return np.where(by_velocity, d1, d2), changed
