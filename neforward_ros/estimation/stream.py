@@ -653,13 +653,8 @@ class StreamingEstimator:
             chosen = self._chosen_fit(group, times, values, target_s, derivative, models, bank, lead)
             got = _per_joint(chosen, m, by_velocity, exact)
         elif self._degrees is not None:  # each degree's rule; the degree chosen per joint by the recent estimates
-            fits = degree_fit(
-                times, values, target_s, half, degree_choice.DEGREES, lead, derivative, finer=degree_choice.FINER
-            )
-            options = _per_joint(fits, m, by_velocity, exact)  # each (D, m)
-            chosen, std = self._degrees.choose(np.asarray(group.joints), options[2], options[3], *options[5:])
-            got = np.stack(options[:5])[:, chosen, np.arange(m)]  # each entry at each joint's chosen degree
-            got = (*got[:3], std, got[4] > 0.5)
+            got = self._chosen_degrees(self._degrees, group, times, values, target_s, lead, derivative, by_velocity,
+                                       exact)  # fmt: skip
         else:
             fit = adaptive_fit(times, values, target_s, half, settings.degree, lead, derivative, settings.lower_degree,
                                _timing(group, lead))  # fmt: skip
@@ -670,6 +665,30 @@ class StreamingEstimator:
                 strained &= ~at_rest(values[:, :m])
             self._watch_windows(group, strained)
         return got[0], got[1], got[2], got[3]
+
+    def _chosen_degrees(
+        self,
+        pool: degree_choice.DegreePool,
+        group: JointHistory,
+        times: np.ndarray,
+        values: np.ndarray,
+        target_s: float,
+        lead: float,
+        derivative: np.ndarray,
+        by_velocity: np.ndarray,
+        exact: bool,
+    ) -> tuple[np.ndarray, ...]:
+        """The default's fit (:mod:`.degree_choice`): each degree's rule and the finer fit over the window's
+        samples, the degree chosen per joint by ``pool``'s record of the recent estimates. The group's joints'
+        position, velocity, acceleration, the standard deviation to state with it, and whether its rule
+        strained (each (m,); the columns as for :func:`_per_joint`)."""
+        m = len(group.joints)
+        fits = degree_fit(times, values, target_s, self.settings.window / 2.0, degree_choice.DEGREES, lead,
+                          derivative, finer=degree_choice.FINER)  # fmt: skip
+        options = _per_joint(fits, m, by_velocity, exact)  # each (D, m)
+        chosen, std = pool.choose(np.asarray(group.joints), options[2], options[3], *options[5:])
+        got = np.stack(options[:5])[:, chosen, np.arange(m)]  # each entry at each joint's chosen degree
+        return (*got[:3], std, got[4] > 0.5)
 
     def _model_candidates(
         self, group: JointHistory, target: int, values: np.ndarray, derivative: np.ndarray
@@ -864,19 +883,16 @@ class StreamingEstimator:
         values = np.where(by_velocity, velocities, positions)
         derivative = np.where(by_velocity, 1, 2)
         at = group.time_of(stamp)
-        if self._reference_degrees is not None:  # each degree's rule, chosen per joint by its record
-            fits = degree_fit(
-                times, values, at, half, degree_choice.DEGREES, half, derivative, finer=degree_choice.FINER
-            )
-            accelerations = np.where(by_velocity, fits[1], fits[2])  # (a joint fitted on its velocities: their first)
-            chosen, _ = self._reference_degrees.choose(np.asarray(group.joints), accelerations, fits[3], *fits[5:])
-            d1, d2 = (degree_choice.pick(x, chosen) for x in (fits[1], fits[2]))
+        if self._reference_degrees is not None:  # the default's own fit, its degrees chosen by their own record
+            pool = self._reference_degrees
+            acceleration = self._chosen_degrees(pool, group, times, values, at, half, derivative, by_velocity, True)[2]
         else:
             order, lower = degrees(None, True, False)
             _, d1, d2, _, _ = adaptive_fit(times, values, at, half, order, half, derivative, lower)
+            acceleration = np.where(by_velocity, d1, d2)
         upto = before + int(times[before:].searchsorted(at, side="right"))  # the estimate's side
         changed = (values[before:upto] != values[before]).any(axis=0)
-        return np.where(by_velocity, d1, d2), changed
+        return acceleration, changed
 
     @staticmethod
     def _samples(group: JointHistory, first_ns: int, last_ns: int) -> tuple[np.ndarray, ...]:
