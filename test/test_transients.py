@@ -93,6 +93,22 @@ def test_the_bank_s_own_estimate_alone_without_a_record_fails_the_start(monkeypa
         test_with_no_record_a_kalman_estimate_states_the_smaller_deviation(monkeypatch)
 
 
+def test_after_a_gap_the_reference_keeps_its_finer_fit() -> None:
+    """kalman 20 ms, a gait at 500 Hz through 20 bits, a 0.3 s gap: the candidates are scored against the
+    reference's finer fit from the gap's end on (stream.REFERENCE_ACROSS_HOLES). Measured 1.51x in the second
+    after the gap (2026-12-02)."""
+    p99, worst, _ = bench_transients.run(KALMAN, "gait", 4, 500.0, 20)
+    assert worst[1] / p99 <= 3.0, worst[1] / p99
+
+
+def test_a_reference_without_its_finer_fit_after_a_gap_fails(monkeypatch) -> None:
+    """The planted bug: a gap keeps the finer fit out of the reference's choice for a second (until
+    2026-12-02): 3.48x."""
+    monkeypatch.setattr(stream_module, "REFERENCE_ACROSS_HOLES", False)
+    with pytest.raises(AssertionError):
+        test_after_a_gap_the_reference_keeps_its_finer_fit()
+
+
 def test_after_a_time_reset_the_record_goes_on() -> None:
     """polyfit causal, a gait at 100 Hz through 20 bits: the record of which window and degree suit each
     joint outlives the restart the stamps going back cause. Measured 1.17x after the reset (2026-11-29)."""

@@ -314,9 +314,10 @@ class DegreePool:
     last second's score terms are kept and summed directly at each choice (in C once compiled,
     :func:`~.native_fit.choose_last`; the whole recording's sliding sums agree to about 1e-12)."""
 
-    def __init__(self, joints: int, candidates: int | None = None, record: float = RECORD) -> None:
+    def __init__(self, joints: int, candidates: int | None = None, record: float = RECORD, holes: bool = True) -> None:
         # the last second's estimates: their terms (terms), then whether counted
         self._finer = FINER
+        self._holes = holes  # whether a hole in the record keeps the finer fit out (HOLE)
         self._record_ns = round(record * NS)  # the least span of a record for the finer fit (RECORD)
         options = len(DEGREES) + self._finer if candidates is None else candidates
         self._rows = StampedRows(round(MEMORY * NS), (2 * options + 5, joints))
@@ -340,7 +341,7 @@ class DegreePool:
         """Begin the estimate at ``stamp_ns`` (after every earlier one); the estimates a second older
         are forgotten."""
         kept = self._rows.stamps
-        if len(kept) and stamp_ns - kept[-1] > round(HOLE * NS):
+        if self._holes and len(kept) and stamp_ns - kept[-1] > round(HOLE * NS):
             self._after_ns = stamp_ns
         self._rows.append(stamp_ns)
         self._counted[:] = 0
